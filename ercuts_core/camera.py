@@ -1,0 +1,197 @@
+"""Camera model: Blender's view plane, primary rays, and importance for light tracing.
+
+The view plane follows Blender's ``BKE_camera_params_compute_viewplane``: the *fitted*
+image dimension (chosen by ``sensor_fit``; AUTO fits the larger of W·aspect_x and
+H·aspect_y, using ``sensor_width`` in both cases) spans ``sensor/lens`` at unit distance
+(perspective) or ``ortho_scale`` (orthographic); the other dimension follows the image
+aspect; ``shift_x``/``shift_y`` move the plane by that many fitted-dimension extents.
+This equals ``Camera.view_frame()`` scaled to z = −1.
+
+Raster coordinates are continuous full-frame pixels: x to the right from the left edge,
+y downward from the top edge; pixel (i, j) covers [i, i+1] × [j, j+1].
+
+Importance (for the t = 1 light-tracing strategy of BDPT) is normalised per pixel:
+a pinhole camera has W_e(ω) = 1 / (A_pix · cos⁴θ), with A_pix the area of one pixel on
+the z = 1 plane [Veach 1997 §10.8; pbrt-v3 PerspectiveCamera::We].
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .description import CameraDesc
+
+
+@dataclass(frozen=True)
+class Window:
+    """Rendered window in full-frame pixels, y from the top."""
+
+    x0: int
+    y0: int
+    width: int
+    height: int
+
+    @property
+    def n_pixels(self) -> int:
+        return self.width * self.height
+
+
+def view_plane(desc: CameraDesc) -> tuple[float, float, float, float]:
+    """(xmin, xmax, ymin, ymax) of the image plane at z = −1 (persp) or z = 0 (ortho), camera space."""
+    ax, ay = desc.pixel_aspect_x, desc.pixel_aspect_y
+    wx, wy = desc.width * ax, desc.height * ay
+    fit = desc.sensor_fit
+    if fit == "AUTO":
+        fit = "HORIZONTAL" if wx >= wy else "VERTICAL"
+        sensor = desc.sensor_width
+    else:
+        sensor = desc.sensor_width if fit == "HORIZONTAL" else desc.sensor_height
+    extent = desc.ortho_scale if desc.projection == "ORTHO" else sensor / desc.lens
+    if fit == "HORIZONTAL":
+        ext_x, ext_y = extent, extent * wy / wx
+    else:
+        ext_x, ext_y = extent * wx / wy, extent
+    cx, cy = desc.shift_x * extent, desc.shift_y * extent
+    return (cx - 0.5 * ext_x, cx + 0.5 * ext_x, cy - 0.5 * ext_y, cy + 0.5 * ext_y)
+
+
+def render_window(desc: CameraDesc) -> Window:
+    """The pixels to render: the border window (Blender truncation rules) or the whole frame."""
+    W, H = desc.width, desc.height
+    if not desc.use_border:
+        return Window(0, 0, W, H)
+    bx0, by0, bx1, by1 = desc.border
+    x0, x1 = int(bx0 * W), int(bx1 * W)
+    yb0, yb1 = int(by0 * H), int(by1 * H)
+    return Window(x0, H - yb1, x1 - x0, yb1 - yb0)
+
+
+class Camera:
+    """Primary-ray generation and pinhole importance for one :class:`CameraDesc`."""
+
+    def __init__(self, desc: CameraDesc):
+        self.desc = desc
+        self.width, self.height = desc.width, desc.height
+        self.window = render_window(desc)
+        self.ortho = desc.projection == "ORTHO"
+        m = np.asarray(desc.world_from_camera, np.float64)
+        rot = m[:3, :3]
+        # Remove any scale the caller left in the matrix (columns become unit vectors).
+        self.rotation = rot / np.linalg.norm(rot, axis=0, keepdims=True)
+        self.position = m[:3, 3].copy()
+        self.forward = -self.rotation[:, 2]
+        self.xmin, self.xmax, self.ymin, self.ymax = view_plane(desc)
+        self.pixel_area = (self.xmax - self.xmin) * (self.ymax - self.ymin) / (self.width * self.height)
+        self.window_area = self.pixel_area * self.window.n_pixels
+        #: True when the camera is a delta in direction (orthographic): no t = 1 connections.
+        self.is_delta_direction = self.ortho
+
+    # ----------------------------------------------------------- primary rays
+    def plane_point(self, raster: NDArray) -> NDArray:
+        """(N, 2) raster → (N, 3) camera-space points on the image plane."""
+        x = self.xmin + raster[:, 0] / self.width * (self.xmax - self.xmin)
+        y = self.ymax - raster[:, 1] / self.height * (self.ymax - self.ymin)
+        z = np.zeros_like(x) if self.ortho else -np.ones_like(x)
+        return np.stack([x, y, z], axis=1)
+
+    def generate_rays(self, raster: NDArray) -> tuple[NDArray, NDArray]:
+        """World-space rays through raster positions.
+
+        Args:
+            raster: (N, 2) float64 full-frame raster coordinates.
+        Returns:
+            origins (N, 3), unit directions (N, 3), float64.
+        """
+        q = self.plane_point(raster)
+        if self.ortho:
+            o = self.position + q @ self.rotation.T
+            d = np.broadcast_to(self.forward, o.shape).copy()
+            return o, d
+        d = q @ self.rotation.T
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        return np.broadcast_to(self.position, d.shape).copy(), d
+
+    def cos_theta(self, d: NDArray) -> NDArray:
+        """(N,) cosine between unit world directions and the viewing axis."""
+        return d @ self.forward
+
+    def pdf_dir(self, d: NDArray) -> NDArray:
+        """(N,) solid-angle density of a camera ray direction for one sample spread
+        uniformly over the rendered window: 1/(A_window·cos³θ) (perspective only)."""
+        c = np.maximum(self.cos_theta(d), 1e-12)
+        return 1.0 / (self.window_area * c**3)
+
+    def pdf_area(self, d: NDArray, dist: NDArray, cos_hit: NDArray) -> NDArray:
+        """(N,) area density at the first hit x1 of a camera ray (pdf_dir converted to area).
+
+        Orthographic: the ray origin is uniform over the window area on the film and
+        the direction is fixed, so p_A(x1) = |cos_hit| / A_window.
+        """
+        if self.ortho:
+            return np.abs(cos_hit) / self.window_area
+        return self.pdf_dir(d) * np.abs(cos_hit) / np.maximum(dist, 1e-30) ** 2
+
+    # ----------------------------------------------------------- light tracing
+    def raster_of(self, p: NDArray) -> tuple[NDArray, NDArray]:
+        """Project world points to raster coordinates.
+
+        Returns:
+            raster (N, 2) and valid (N,) (in front of the camera and inside the window).
+        """
+        q = (p - self.position) @ self.rotation
+        depth = -q[:, 2]
+        if self.ortho:
+            x, y = q[:, 0], q[:, 1]
+            front = depth > 0
+        else:
+            front = depth > 1e-12
+            safe = np.where(front, depth, 1.0)
+            x, y = q[:, 0] / safe, q[:, 1] / safe
+        rx = (x - self.xmin) / (self.xmax - self.xmin) * self.width
+        ry = (self.ymax - y) / (self.ymax - self.ymin) * self.height
+        raster = np.stack([rx, ry], axis=1)
+        w = self.window
+        inside = (rx >= w.x0) & (rx < w.x0 + w.width) & (ry >= w.y0) & (ry < w.y0 + w.height)
+        return raster, front & inside
+
+    def connect(self, p: NDArray) -> "CameraConnection":
+        """Connect scene points to the pinhole (BDPT t = 1, light tracing).
+
+        The pixel measurement of light leaving ``p`` toward the camera with radiance L is
+        ``L · |cos_p| · factor`` per unit area at p, where
+        ``factor = W_e·|cos_cam|/d² = 1/(A_pix·cos³θ·d²)``.
+        """
+        n = len(p)
+        if self.ortho:
+            z = np.zeros(n)
+            return CameraConnection(np.zeros((n, 2)), np.zeros((n, 3)), z, z, np.zeros(n, bool))
+        raster, valid = self.raster_of(p)
+        to_cam = self.position - p
+        dist = np.linalg.norm(to_cam, axis=1)
+        wi = to_cam / np.maximum(dist, 1e-30)[:, None]
+        cos_cam = -(wi @ self.forward)
+        valid &= (cos_cam > 1e-8) & (dist > 0)
+        c = np.where(valid, cos_cam, 1.0)
+        factor = np.where(valid, 1.0 / (self.pixel_area * c**3 * np.maximum(dist, 1e-30) ** 2), 0.0)
+        return CameraConnection(raster, wi, dist, factor, valid)
+
+
+@dataclass
+class CameraConnection:
+    """Result of :meth:`Camera.connect` for N points.
+
+    Attributes:
+        raster: (N, 2) full-frame raster position of each point's image.
+        wi: (N, 3) unit direction from the point toward the camera.
+        dist: (N,) distance to the camera [m].
+        factor: (N,) W_e·|cos_cam|/d² = 1/(A_pix·cos³θ·d²) (0 where invalid).
+        valid: (N,) visible-in-window and in front of the camera (occlusion not tested).
+    """
+
+    raster: NDArray
+    wi: NDArray
+    dist: NDArray
+    factor: NDArray
+    valid: NDArray

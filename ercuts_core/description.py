@@ -1,0 +1,409 @@
+"""The scene description: the one interface between Blender (or any caller) and the core.
+
+Everything the core needs is a frozen dataclass of C-contiguous numpy arrays in world
+space, with fixed dtypes. The add-on builds it from Blender's depsgraph; tests and the
+command line build or load it directly. It round-trips through one ``.npz`` file
+(:func:`save_npz` / :func:`load_npz`) for bug reports and golden tests.
+
+Conventions and units (documented once, here):
+
+* Lengths in metres (Blender units after the unit scale), right-handed world frame.
+* Colours are linear Rec.709 RGB.
+* Emitter radiance (materials' ``emission``, area lights, world) in W·sr⁻¹·m⁻².
+* Point/spot intensity in W/sr; sun irradiance in W/m² on a surface facing the sun.
+* The camera looks down its local −Z axis with +Y up (Blender's convention);
+  ``world_from_camera`` is a rigid transform (rotation + translation, no scale).
+* Triangles wind counter-clockwise around their geometric normal (Blender's face
+  normals); negative-scale objects must already have their winding flipped.
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+import tempfile
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+from numpy.typing import NDArray
+
+F32 = NDArray[np.float32]
+F64 = NDArray[np.float64]
+I32 = NDArray[np.int32]
+
+SCHEMA_VERSION = 1
+
+#: Area-light shapes (``AreaLights.shape``): Blender's SQUARE/RECTANGLE map to RECT,
+#: DISK/ELLIPSE map to ELLIPSE.
+SHAPE_RECT = 0
+SHAPE_ELLIPSE = 1
+
+
+def _f32(a, shape_tail: tuple[int, ...]) -> F32:
+    """Return ``a`` as a C-contiguous float32 array of shape (N, *shape_tail)."""
+    arr = np.ascontiguousarray(np.asarray(a, dtype=np.float32))
+    if arr.size == 0:
+        arr = arr.reshape((0, *shape_tail))
+    return arr
+
+
+def _i32(a) -> I32:
+    arr = np.ascontiguousarray(np.asarray(a, dtype=np.int32))
+    return arr
+
+
+@dataclass(frozen=True)
+class MeshTable:
+    """All triangles of the scene, merged into one world-space mesh.
+
+    Attributes:
+        positions: (V, 3) float32 vertex positions, world space [m].
+        triangles: (T, 3) int32 vertex indices, counter-clockwise around the face normal.
+        material_ids: (T,) int32 row in :class:`MaterialTable`.
+        object_ids: (T,) int32 index into ``SceneDescription.object_names``.
+        normals: (V, 3) float32 unit shading normals, or None (all faces flat).
+        smooth: (T,) bool, True where the face uses interpolated ``normals``;
+            None means "smooth wherever normals are given".
+    """
+
+    positions: F32
+    triangles: I32
+    material_ids: I32
+    object_ids: I32
+    normals: F32 | None = None
+    smooth: NDArray[np.bool_] | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "positions", _f32(self.positions, (3,)))
+        tris = _i32(self.triangles)
+        object.__setattr__(self, "triangles", tris.reshape(-1, 3) if tris.size == 0 else tris)
+        object.__setattr__(self, "material_ids", _i32(self.material_ids).reshape(-1))
+        object.__setattr__(self, "object_ids", _i32(self.object_ids).reshape(-1))
+        if self.normals is not None:
+            object.__setattr__(self, "normals", _f32(self.normals, (3,)))
+        if self.smooth is not None:
+            object.__setattr__(self, "smooth", np.ascontiguousarray(self.smooth, dtype=bool).reshape(-1))
+
+    @property
+    def n_triangles(self) -> int:
+        return int(self.triangles.shape[0])
+
+
+@dataclass(frozen=True)
+class MaterialTable:
+    """One row per material (structure of arrays).
+
+    The BSDF is a Lambertian base plus an optional GGX specular lobe
+    (see :mod:`ercuts_core.bsdf`).
+
+    Attributes:
+        names: material names, for messages.
+        base_color: (M, 3) float32 linear RGB albedo in [0, 1].
+        roughness: (M,) float32 Principled roughness in [0, 1] (GGX alpha = roughness²).
+        metallic: (M,) float32 in [0, 1].
+        specular: (M,) float32 Principled "Specular (IOR Level)"; 0.5 ↔ F0 = 0.04; 0 = pure Lambert.
+        emission: (M, 3) float32 emitted radiance [W·sr⁻¹·m⁻²] (colour × strength), two-sided.
+    """
+
+    names: tuple[str, ...]
+    base_color: F32
+    roughness: F32
+    metallic: F32
+    specular: F32
+    emission: F32
+
+    def __post_init__(self):
+        object.__setattr__(self, "names", tuple(str(n) for n in self.names))
+        object.__setattr__(self, "base_color", _f32(self.base_color, (3,)))
+        object.__setattr__(self, "emission", _f32(self.emission, (3,)))
+        for name in ("roughness", "metallic", "specular"):
+            object.__setattr__(self, name, _f32(getattr(self, name), ()).reshape(-1))
+
+    @property
+    def n_materials(self) -> int:
+        return len(self.names)
+
+    @staticmethod
+    def diffuse(names, base_color, emission=None) -> "MaterialTable":
+        """Pure Lambertian materials (specular 0, metallic 0, roughness 1)."""
+        base = np.asarray(base_color, np.float32).reshape(-1, 3)
+        m = base.shape[0]
+        em = np.zeros((m, 3), np.float32) if emission is None else np.asarray(emission, np.float32)
+        return MaterialTable(tuple(names), base, np.ones(m), np.zeros(m), np.zeros(m), em)
+
+
+@dataclass(frozen=True)
+class PointLights:
+    """Point and spot lights (a point light is a spot with ``cos_half_angle`` = −1).
+
+    Attributes:
+        position: (P, 3) float32 [m].
+        intensity: (P, 3) float32 radiant intensity [W/sr] (Blender: colour·power/(4π)).
+        direction: (P, 3) float32 unit spot axis (the direction the spot points).
+        cos_half_angle: (P,) float32 cosine of half the spot's full cone angle; −1 for point lights.
+        blend: (P,) float32 Blender spot_blend in [0, 1] (smoothstep falloff width).
+        radius: (P,) float32 Blender's soft-shadow radius [m] (rendered as a point, see notes).
+        object_ids: (P,) int32 index into ``object_names``.
+    """
+
+    position: F32
+    intensity: F32
+    direction: F32
+    cos_half_angle: F32
+    blend: F32
+    radius: F32
+    object_ids: I32
+
+    def __post_init__(self):
+        for name in ("position", "intensity", "direction"):
+            object.__setattr__(self, name, _f32(getattr(self, name), (3,)))
+        for name in ("cos_half_angle", "blend", "radius"):
+            object.__setattr__(self, name, _f32(getattr(self, name), ()).reshape(-1))
+        object.__setattr__(self, "object_ids", _i32(self.object_ids).reshape(-1))
+
+    def __len__(self) -> int:
+        return int(self.position.shape[0])
+
+
+@dataclass(frozen=True)
+class SunLights:
+    """Distant (directional) lights.
+
+    Attributes:
+        direction: (S, 3) float32 unit direction the light travels (Blender: local −Z).
+        irradiance: (S, 3) float32 irradiance on a surface facing the sun [W/m²].
+        angle: (S,) float32 angular diameter [rad] (rendered as 0, see notes).
+        object_ids: (S,) int32.
+    """
+
+    direction: F32
+    irradiance: F32
+    angle: F32
+    object_ids: I32
+
+    def __post_init__(self):
+        for name in ("direction", "irradiance"):
+            object.__setattr__(self, name, _f32(getattr(self, name), (3,)))
+        object.__setattr__(self, "angle", _f32(self.angle, ()).reshape(-1))
+        object.__setattr__(self, "object_ids", _i32(self.object_ids).reshape(-1))
+
+    def __len__(self) -> int:
+        return int(self.direction.shape[0])
+
+
+@dataclass(frozen=True)
+class AreaLights:
+    """One-sided planar area lights (rectangles and ellipses).
+
+    A point on the light is ``center + a·axis_u + b·axis_v`` with (a, b) in [−1, 1]² for
+    RECT and a² + b² ≤ 1 for ELLIPSE, so ``axis_u``/``axis_v`` are *half*-extent vectors
+    (object scale applied). The light emits into the hemisphere of ``normal``
+    (Blender: local −Z). Area lights are not intersectable: camera and BSDF rays pass
+    through them, and they are reached by next-event estimation only.
+
+    Attributes:
+        center: (A, 3) float32 [m].
+        axis_u: (A, 3) float32 half-extent along the light's local X [m].
+        axis_v: (A, 3) float32 half-extent along the light's local Y [m].
+        normal: (A, 3) float32 unit emission normal.
+        radiance: (A, 3) float32 [W·sr⁻¹·m⁻²].
+        shape: (A,) int32, SHAPE_RECT or SHAPE_ELLIPSE.
+        object_ids: (A,) int32.
+    """
+
+    center: F32
+    axis_u: F32
+    axis_v: F32
+    normal: F32
+    radiance: F32
+    shape: I32
+    object_ids: I32
+
+    def __post_init__(self):
+        for name in ("center", "axis_u", "axis_v", "normal", "radiance"):
+            object.__setattr__(self, name, _f32(getattr(self, name), (3,)))
+        object.__setattr__(self, "shape", _i32(self.shape).reshape(-1))
+        object.__setattr__(self, "object_ids", _i32(self.object_ids).reshape(-1))
+
+    def __len__(self) -> int:
+        return int(self.center.shape[0])
+
+
+def _empty_points() -> PointLights:
+    return PointLights(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), [], [], [], [])
+
+
+def _empty_suns() -> SunLights:
+    return SunLights(np.zeros((0, 3)), np.zeros((0, 3)), [], [])
+
+
+def _empty_areas() -> AreaLights:
+    z = np.zeros((0, 3))
+    return AreaLights(z, z, z, z, z, [], [])
+
+
+@dataclass(frozen=True)
+class CameraDesc:
+    """Blender-style camera: the core derives the image window exactly as Blender does.
+
+    Attributes:
+        world_from_camera: (4, 4) float64 rigid transform; camera looks down −Z, +Y up.
+        width, height: full-frame resolution in pixels (percentage already applied).
+        projection: 'PERSP' or 'ORTHO'.
+        lens: focal length [mm] (perspective).
+        sensor_width, sensor_height: [mm].
+        sensor_fit: 'AUTO', 'HORIZONTAL' or 'VERTICAL'.
+        shift_x, shift_y: lens shift in units of the fitted image dimension.
+        ortho_scale: width of the fitted dimension [m] (orthographic).
+        pixel_aspect_x, pixel_aspect_y: Blender's pixel aspect.
+        border: (xmin, ymin, xmax, ymax) fractions of the frame, y measured from the
+            *bottom* (Blender's convention); used when ``use_border``.
+        use_border: render only the border window.
+        clip_start, clip_end: [m].
+    """
+
+    world_from_camera: F64
+    width: int
+    height: int
+    projection: str = "PERSP"
+    lens: float = 50.0
+    sensor_width: float = 36.0
+    sensor_height: float = 24.0
+    sensor_fit: str = "AUTO"
+    shift_x: float = 0.0
+    shift_y: float = 0.0
+    ortho_scale: float = 7.314
+    pixel_aspect_x: float = 1.0
+    pixel_aspect_y: float = 1.0
+    border: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)
+    use_border: bool = False
+    clip_start: float = 1e-3
+    clip_end: float = 1e30
+
+    def __post_init__(self):
+        m = np.ascontiguousarray(np.asarray(self.world_from_camera, dtype=np.float64))
+        object.__setattr__(self, "world_from_camera", m)
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+        object.__setattr__(self, "border", tuple(float(b) for b in self.border))
+
+
+@dataclass(frozen=True)
+class SceneDescription:
+    """A complete scene: geometry, materials, lights, camera, world.
+
+    ``camera`` may be None only so that validation can report "no camera" as an error.
+    ``world_radiance`` is the constant background radiance (3,) [W·sr⁻¹·m⁻²].
+    """
+
+    mesh: MeshTable
+    materials: MaterialTable
+    camera: CameraDesc | None
+    point_lights: PointLights = field(default_factory=_empty_points)
+    sun_lights: SunLights = field(default_factory=_empty_suns)
+    area_lights: AreaLights = field(default_factory=_empty_areas)
+    world_radiance: F32 = field(default_factory=lambda: np.zeros(3, np.float32))
+    object_names: tuple[str, ...] = ()
+    schema_version: int = SCHEMA_VERSION
+
+    def __post_init__(self):
+        object.__setattr__(self, "world_radiance", _f32(self.world_radiance, ()).reshape(3))
+        object.__setattr__(self, "object_names", tuple(str(n) for n in self.object_names))
+
+    def object_name(self, index: int) -> str:
+        """Name of object ``index`` for messages (falls back to '#index')."""
+        if 0 <= index < len(self.object_names):
+            return self.object_names[index]
+        return f"#{index}"
+
+    def replace(self, **changes) -> "SceneDescription":
+        return dataclasses.replace(self, **changes)
+
+
+# --------------------------------------------------------------------------- npz I/O
+
+_PARTS = {
+    "mesh": MeshTable,
+    "materials": MaterialTable,
+    "point_lights": PointLights,
+    "sun_lights": SunLights,
+    "area_lights": AreaLights,
+    "camera": CameraDesc,
+}
+
+
+def _to_array(value):
+    if isinstance(value, str):
+        return np.array(value)
+    if isinstance(value, tuple) and all(isinstance(v, str) for v in value):
+        return np.array(value, dtype=str).reshape(len(value))
+    return np.asarray(value)
+
+
+def _from_array(cls, name: str, arr: np.ndarray):
+    ftype = {f.name: f.type for f in fields(cls)}[name]
+    if arr.dtype.kind == "U":
+        return str(arr) if arr.ndim == 0 else tuple(str(s) for s in arr)
+    if arr.ndim == 0:
+        if "bool" in str(ftype):
+            return bool(arr)
+        if "int" in str(ftype) and "float" not in str(ftype):
+            return int(arr)
+        return float(arr) if arr.dtype.kind == "f" else arr.item()
+    if "tuple" in str(ftype):
+        return tuple(arr.tolist())
+    return arr
+
+
+def save_npz(desc: SceneDescription, path: str | os.PathLike) -> None:
+    """Write ``desc`` to one ``.npz`` file, atomically (temp file + rename)."""
+    data: dict[str, np.ndarray] = {
+        "schema_version": np.array(desc.schema_version),
+        "world_radiance": desc.world_radiance,
+        "object_names": _to_array(desc.object_names),
+    }
+    for part in _PARTS:
+        obj = getattr(desc, part)
+        if obj is None:
+            continue
+        for f in fields(obj):
+            value = getattr(obj, f.name)
+            if value is not None:
+                data[f"{part}.{f.name}"] = _to_array(value)
+    path = os.fspath(path)
+    directory = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(suffix=".npz", dir=directory)
+    os.close(fd)
+    try:
+        np.savez_compressed(tmp, **data)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def load_npz(path: str | os.PathLike) -> SceneDescription:
+    """Read a description written by :func:`save_npz`."""
+    with np.load(path, allow_pickle=False) as z:
+        keys = set(z.files)
+        parts = {}
+        for part, cls in _PARTS.items():
+            kwargs = {}
+            for f in fields(cls):
+                key = f"{part}.{f.name}"
+                if key in keys:
+                    kwargs[f.name] = _from_array(cls, f.name, z[key])
+            if kwargs:
+                parts[part] = cls(**kwargs)
+        names = z["object_names"]
+        return SceneDescription(
+            mesh=parts["mesh"],
+            materials=parts["materials"],
+            camera=parts.get("camera"),
+            point_lights=parts.get("point_lights", _empty_points()),
+            sun_lights=parts.get("sun_lights", _empty_suns()),
+            area_lights=parts.get("area_lights", _empty_areas()),
+            world_radiance=z["world_radiance"],
+            object_names=tuple(str(s) for s in names.reshape(-1)),
+            schema_version=int(z["schema_version"]),
+        )

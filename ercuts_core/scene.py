@@ -1,0 +1,104 @@
+"""The built scene: tracer, per-triangle tables, lights and camera derived from a clean description.
+
+:class:`BuiltScene` is immutable after construction and never changes the description.
+:meth:`BuiltScene.surface` turns embreex hits into float64 surface interactions
+(positions from barycentrics, geometric and shading normals, material rows, emission).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .camera import Camera
+from .description import SceneDescription
+from .lights import LightSet
+from .tracer import Hit, Tracer
+
+
+@dataclass
+class Surface:
+    """Surface interactions of N rays (only meaningful where ``valid``).
+
+    Attributes:
+        valid: (N,) the ray hit something.
+        p: (N, 3) float64 hit position [m].
+        ng: (N, 3) unit geometric normal (triangle winding; not flipped toward the ray).
+        ns: (N, 3) unit shading normal, in the same hemisphere as ``ng``.
+        prim: (N,) triangle index (−1 on misses).
+        mat: (N,) material row.
+        t: (N,) distance along the ray.
+    """
+
+    valid: NDArray
+    p: NDArray
+    ng: NDArray
+    ns: NDArray
+    prim: NDArray
+    mat: NDArray
+    t: NDArray
+
+    def subset(self, idx) -> "Surface":
+        return Surface(self.valid[idx], self.p[idx], self.ng[idx], self.ns[idx], self.prim[idx],
+                       self.mat[idx], self.t[idx])
+
+
+class BuiltScene:
+    """Everything an integrator needs, derived from a *validated* description."""
+
+    def __init__(self, desc: SceneDescription, threads: int = 0):
+        self.desc = desc
+        mesh = desc.mesh
+        self.materials = desc.materials
+        self.tracer = Tracer(mesh.positions, mesh.triangles, threads=threads)
+        pos = mesh.positions.astype(np.float64)
+        self.tri_p = pos[mesh.triangles] if mesh.n_triangles else np.zeros((0, 3, 3))   # (T, 3, 3)
+        cross = np.cross(self.tri_p[:, 1] - self.tri_p[:, 0], self.tri_p[:, 2] - self.tri_p[:, 0])
+        length = np.linalg.norm(cross, axis=1)
+        self.tri_area = 0.5 * length                                                     # (T,) m²
+        self.tri_ng = cross / np.maximum(length, 1e-300)[:, None]                        # (T, 3)
+        self.tri_mat = mesh.material_ids.astype(np.int64)
+        self.has_normals = mesh.normals is not None
+        if self.has_normals:
+            self.tri_vn = mesh.normals.astype(np.float64)[mesh.triangles]                # (T, 3, 3)
+            self.tri_smooth = np.ones(mesh.n_triangles, bool) if mesh.smooth is None else mesh.smooth
+        self.lights = LightSet(desc, self.tri_p, self.tri_ng, self.tri_area)
+        self.camera = Camera(desc.camera)
+        self.scene_radius = self.lights.radius
+
+    def intersect(self, o: NDArray, d: NDArray, tmax=None) -> Surface:
+        """Trace rays and return their surface interactions."""
+        return self.surface(self.tracer.intersect(o, d, tmax))
+
+    def surface(self, hit: Hit) -> Surface:
+        """Surface interactions from embreex hits (positions from barycentrics, float64)."""
+        valid = hit.valid
+        prim = np.where(valid, hit.prim, 0)
+        n = len(prim)
+        if self.tri_p.shape[0] == 0:
+            z = np.zeros((n, 3))
+            return Surface(valid, z, z, z, hit.prim, np.zeros(n, np.int64), hit.t)
+        b = np.stack([1.0 - hit.u - hit.v, hit.u, hit.v], axis=1)                        # (N, 3)
+        p = np.einsum("nk,nkj->nj", b, self.tri_p[prim])
+        ng = self.tri_ng[prim]
+        ns = ng
+        if self.has_normals:
+            interp = np.einsum("nk,nkj->nj", b, self.tri_vn[prim])
+            ln = np.linalg.norm(interp, axis=1)
+            use = self.tri_smooth[prim] & (ln > 1e-8)
+            interp = interp / np.maximum(ln, 1e-300)[:, None]
+            # Keep the shading normal on the geometric normal's side.
+            flip = np.einsum("ij,ij->i", interp, ng) < 0
+            interp[flip] *= -1.0
+            ns = np.where(use[:, None], interp, ng)
+        return Surface(valid, p, ng, ns, hit.prim, self.tri_mat[prim], hit.t)
+
+    def emission(self, surf: Surface) -> NDArray:
+        """(N, 3) radiance emitted by the hit triangles (two-sided; 0 for misses)."""
+        out = self.lights.tri_radiance(np.where(surf.valid, surf.prim, 0))
+        out[~surf.valid] = 0.0
+        return out
+
+    def close(self) -> None:
+        self.tracer.close()

@@ -1,0 +1,209 @@
+"""The one place where bad input becomes an error, a warning with a fallback, or a silent skip.
+
+Policy (shared docs, style-and-testing.md §2.6, after BlendLuxCore's rule):
+
+* **error** — no meaningful image is possible: :class:`SceneError` with a message that
+  names the Blender object where there is one (no camera, zero resolution, empty border);
+* **warning** — the user can probably fix it: a fallback is used and one :class:`Issue`
+  is reported per object (NaN/Inf vertices, indices out of range, bad material ids,
+  non-finite light parameters, no lights at all → black image);
+* **silent** — normal in Blender scenes: skipped and counted in ``stats`` only
+  (zero-area triangles, zero-power lights, zero-size area lights).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .description import (AreaLights, MaterialTable, MeshTable, PointLights, SceneDescription,
+                          SunLights)
+from .sampling import luminance
+
+
+class SceneError(ValueError):
+    """The scene cannot be rendered; the message says why and names the object."""
+
+
+@dataclass(frozen=True)
+class Issue:
+    """A problem found in the input.
+
+    Attributes:
+        severity: 'error', 'warning' or 'info'.
+        code: stable identifier, e.g. 'nonfinite_vertices'.
+        message: one line for the user, naming the object.
+        object_name: the Blender object concerned, or ''.
+    """
+
+    severity: str
+    code: str
+    message: str
+    object_name: str = ""
+
+    def __str__(self) -> str:
+        return self.message
+
+
+@dataclass
+class Validated:
+    """A clean description plus what was found."""
+
+    desc: SceneDescription
+    issues: list[Issue]
+    stats: dict[str, int]
+
+
+def _names(desc: SceneDescription, object_ids: np.ndarray) -> list[str]:
+    return [desc.object_name(int(i)) for i in np.unique(object_ids)]
+
+
+def _per_object(desc: SceneDescription, object_ids: np.ndarray) -> list[tuple[str, int]]:
+    ids, counts = np.unique(object_ids, return_counts=True)
+    return [(desc.object_name(int(i)), int(c)) for i, c in zip(ids, counts)]
+
+
+def _check_camera(desc: SceneDescription) -> None:
+    cam = desc.camera
+    if cam is None:
+        raise SceneError("Scene has no active camera: set one in Scene properties")
+    if cam.width < 1 or cam.height < 1:
+        raise SceneError(f"Resolution {cam.width}x{cam.height} is empty: width and height must be >= 1")
+    m = np.asarray(cam.world_from_camera)
+    if m.shape != (4, 4) or not np.isfinite(m).all() or abs(np.linalg.det(m[:3, :3])) < 1e-12:
+        raise SceneError("Camera transform is degenerate or not finite")
+    if cam.projection not in ("PERSP", "ORTHO"):
+        raise SceneError(f"Camera projection {cam.projection!r} is not supported (PERSP, ORTHO)")
+    if cam.projection == "PERSP" and not cam.lens > 0:
+        raise SceneError(f"Camera focal length {cam.lens} mm must be > 0")
+    if cam.use_border:
+        from .camera import render_window
+        w = render_window(cam)
+        if w.width < 1 or w.height < 1:
+            raise SceneError(f"Render border {cam.border} is empty at {cam.width}x{cam.height}")
+
+
+def _clean_mesh(desc: SceneDescription, issues: list[Issue], stats: dict[str, int]) -> MeshTable:
+    mesh = desc.mesh
+    pos, tris = mesh.positions, mesh.triangles
+    nv = len(pos)
+    keep = np.ones(len(tris), bool)
+    # Indices out of range: drop the triangles, warn per object.
+    bad_idx = ((tris < 0) | (tris >= nv)).any(axis=1) if len(tris) else keep[:0]
+    if bad_idx.any():
+        for name, n in _per_object(desc, mesh.object_ids[bad_idx]):
+            issues.append(Issue("warning", "index_out_of_range",
+                                f"Object '{name}': {n} triangle(s) with vertex indices out of range were skipped", name))
+        keep &= ~bad_idx
+    safe = np.where(bad_idx[:, None], 0, tris) if len(tris) else tris
+    # NaN/Inf vertices: drop their triangles (Cycles does the same), warn per object.
+    finite_v = np.isfinite(pos).all(axis=1) if nv else np.zeros(0, bool)
+    bad_pos = ~finite_v[safe].all(axis=1) & keep if len(tris) else keep[:0]
+    if bad_pos.any():
+        for name, n in _per_object(desc, mesh.object_ids[bad_pos]):
+            issues.append(Issue("warning", "nonfinite_vertices",
+                                f"Object '{name}': {n} triangle(s) with NaN/Inf vertices were skipped", name))
+        keep &= ~bad_pos
+    # Zero-area triangles: silent, counted.
+    if len(tris):
+        p = np.where(finite_v[:, None], pos, 0).astype(np.float64)[safe]
+        area2 = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+        degenerate = keep & ~(area2 > 0)
+        stats["degenerate_triangles"] = int(degenerate.sum())
+        keep &= ~degenerate
+    # Material ids out of range: fall back to the last (grey) material, warn.
+    mat_ids = mesh.material_ids.copy()
+    bad_mat = (mat_ids < 0) | (mat_ids >= desc.materials.n_materials)
+    if bad_mat.any():
+        for name in _names(desc, mesh.object_ids[bad_mat & keep]):
+            issues.append(Issue("warning", "material_out_of_range",
+                                f"Object '{name}': material index out of range, using grey diffuse", name))
+        mat_ids[bad_mat] = desc.materials.n_materials  # the fallback row appended below
+    stats["triangles"] = int(keep.sum())
+    normals = mesh.normals
+    smooth = mesh.smooth
+    if normals is not None:
+        ok = np.isfinite(normals).all(axis=1) & (np.linalg.norm(normals, axis=1) > 1e-12)
+        normals = np.where(ok[:, None], normals, 0).astype(np.float32)
+        normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+        tri_ok = ok[safe].all(axis=1) if len(tris) else ok[:0]
+        smooth = (np.ones(len(tris), bool) if smooth is None else smooth) & tri_ok
+    return MeshTable(pos, tris[keep], mat_ids[keep], mesh.object_ids[keep],
+                     normals, None if smooth is None else smooth[keep])
+
+
+def _clean_materials(mats: MaterialTable) -> MaterialTable:
+    """Clip to valid ranges, replace NaN with defaults, append the grey fallback row."""
+    def fix(a, lo, hi, default):
+        return np.clip(np.nan_to_num(a, nan=default, posinf=hi, neginf=lo), lo, hi)
+    return MaterialTable(
+        mats.names + ("Ercuts fallback grey",),
+        np.vstack([fix(mats.base_color, 0, 1, 0.8), [[0.8, 0.8, 0.8]]]),
+        np.append(fix(mats.roughness, 0, 1, 0.5), 1.0),
+        np.append(fix(mats.metallic, 0, 1, 0.0), 0.0),
+        np.append(fix(mats.specular, 0, 1, 0.5), 0.0),
+        np.vstack([fix(mats.emission, 0, np.inf, 0.0), [[0, 0, 0]]]).reshape(-1, 3),
+    )
+
+
+def _finite_rows(desc, arrays, object_ids, kind, issues) -> np.ndarray:
+    ok = np.ones(len(object_ids), bool)
+    for a in arrays:
+        ok &= np.isfinite(a.reshape(len(object_ids), -1)).all(axis=1)
+    for name in _names(desc, object_ids[~ok]):
+        issues.append(Issue("warning", "nonfinite_light",
+                            f"Light '{name}': non-finite {kind} parameters, light skipped", name))
+    return ok
+
+
+def _clean_lights(desc, issues, stats):
+    pl, sl, al = desc.point_lights, desc.sun_lights, desc.area_lights
+    ok = _finite_rows(desc, [pl.position, pl.intensity, pl.direction, pl.cos_half_angle, pl.blend],
+                      pl.object_ids, "point/spot", issues)
+    on = ok & (luminance(np.maximum(pl.intensity, 0)) > 0)
+    stats["dropped_zero_lights"] = int((ok & ~on).sum())
+    pl = PointLights(pl.position[on], np.maximum(pl.intensity[on], 0), pl.direction[on],
+                     pl.cos_half_angle[on], np.clip(pl.blend[on], 0, 1), pl.radius[on], pl.object_ids[on])
+    ok = _finite_rows(desc, [sl.direction, sl.irradiance], sl.object_ids, "sun", issues)
+    on = ok & (luminance(np.maximum(sl.irradiance, 0)) > 0) & (np.linalg.norm(sl.direction, axis=1) > 0)
+    stats["dropped_zero_lights"] += int((ok & ~on).sum())
+    d = sl.direction[on] / np.linalg.norm(sl.direction[on], axis=1, keepdims=True)
+    sl = SunLights(d, np.maximum(sl.irradiance[on], 0), sl.angle[on], sl.object_ids[on])
+    ok = _finite_rows(desc, [al.center, al.axis_u, al.axis_v, al.normal, al.radiance],
+                      al.object_ids, "area", issues)
+    area = np.linalg.norm(np.cross(al.axis_u, al.axis_v), axis=1)
+    on = ok & (luminance(np.maximum(al.radiance, 0)) > 0) & (area > 0) & (np.linalg.norm(al.normal, axis=1) > 0)
+    stats["dropped_zero_lights"] += int((ok & ~on).sum())
+    n = al.normal[on] / np.linalg.norm(al.normal[on], axis=1, keepdims=True)
+    al = AreaLights(al.center[on], al.axis_u[on], al.axis_v[on], n, np.maximum(al.radiance[on], 0),
+                    al.shape[on], al.object_ids[on])
+    return pl, sl, al
+
+
+def has_emitters(desc: SceneDescription) -> bool:
+    """True when anything in a (clean) description emits light."""
+    emissive = luminance(desc.materials.emission) > 0
+    tri_emit = emissive[desc.mesh.material_ids].any() if desc.mesh.n_triangles else False
+    return bool(len(desc.point_lights) or len(desc.sun_lights) or len(desc.area_lights) or tri_emit
+                or luminance(desc.world_radiance) > 0)
+
+
+def sanitize(desc: SceneDescription) -> Validated:
+    """Check ``desc``; raise :class:`SceneError` for fatal problems, else return a clean copy.
+
+    The clean copy has only finite, in-range triangles, a material table with a grey
+    fallback row appended (used for out-of-range ids), and only lights that emit.
+    """
+    issues: list[Issue] = []
+    stats: dict[str, int] = {}
+    _check_camera(desc)
+    mesh = _clean_mesh(desc, issues, stats)
+    mats = _clean_materials(desc.materials)
+    pl, sl, al = _clean_lights(desc, issues, stats)
+    world = np.clip(np.nan_to_num(desc.world_radiance, nan=0.0, posinf=0.0), 0, None)
+    clean = desc.replace(mesh=mesh, materials=mats, point_lights=pl, sun_lights=sl, area_lights=al,
+                         world_radiance=world)
+    if not has_emitters(clean):
+        issues.append(Issue("warning", "no_lights",
+                            "Scene has no lights (or all lights have zero power): the image is black"))
+    return Validated(clean, issues, stats)

@@ -149,7 +149,7 @@ def _clean_materials(mats: MaterialTable) -> MaterialTable:
 def _finite_rows(desc, arrays, object_ids, kind, issues) -> np.ndarray:
     ok = np.ones(len(object_ids), bool)
     for a in arrays:
-        ok &= np.isfinite(a.reshape(len(object_ids), -1)).all(axis=1)
+        ok &= np.isfinite(a.reshape(len(object_ids), -1)).all(axis=1) if len(object_ids) else ok
     for name in _names(desc, object_ids[~ok]):
         issues.append(Issue("warning", "nonfinite_light",
                             f"Light '{name}': non-finite {kind} parameters, light skipped", name))

@@ -1,0 +1,116 @@
+"""Command line: render an ``.npz`` scene (or a built-in scene) to EXR + PNG with a progress bar.
+
+Examples::
+
+    python -m ercuts_core render builtin:s_corridor -o out/s_corridor.exr --samples 64
+    python -m ercuts_core render bug_report.npz -o out/frame.exr --integrator PATH
+    python -m ercuts_core save-builtin cornell_box cornell.npz
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+from . import __version__
+from .description import load_npz, save_npz
+from .image_io import write_exr, write_png
+from .render import render
+from .scenes import SCENES
+from .settings import RenderSettings
+from .validate import SceneError
+
+
+def _load(spec: str, width: int | None, height: int | None):
+    if spec.startswith("builtin:"):
+        name = spec.split(":", 1)[1]
+        if name not in SCENES:
+            raise SystemExit(f"unknown built-in scene {name!r}; choose from {sorted(SCENES)}")
+        kwargs = {}
+        if width:
+            kwargs["width"] = width
+        if height:
+            kwargs["height"] = height
+        return SCENES[name](**kwargs)
+    return load_npz(spec)
+
+
+def _progress_bar():
+    """A tqdm progress callback (fraction, message) -> None."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=1000, unit="‰", file=sys.stderr, dynamic_ncols=True, leave=True)
+
+    def progress(fraction: float, message: str):
+        bar.n = int(fraction * 1000)
+        bar.set_description(message, refresh=False)
+        bar.refresh()
+        return None
+
+    return bar, progress
+
+
+def cmd_render(args) -> int:
+    desc = _load(args.scene, args.width, args.height)
+    settings = RenderSettings(integrator=args.integrator, samples=args.samples, seed=args.seed,
+                              max_depth=args.max_depth, time_limit=args.time_limit)
+    bar, progress = _progress_bar()
+    t0 = time.perf_counter()
+    try:
+        result = render(desc, settings, progress)
+    except SceneError as exc:
+        bar.close()
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    bar.close()
+    for issue in result.issues:
+        print(f"{issue.severity}: {issue.message}", file=sys.stderr)
+    write_exr(args.output, result.image)
+    png = args.png or os.path.splitext(args.output)[0] + ".png"
+    write_png(png, result.image)
+    print(f"Ercuts {__version__} {settings.integrator}: {result.summary()}")
+    print("timings: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items()))
+    print(f"wrote {args.output} and {png} in {time.perf_counter() - t0:.2f} s")
+    if args.stats:
+        with open(args.stats, "w") as fh:
+            json.dump({"settings": settings.to_dict(), "timings": result.timings,
+                       "stats": result.stats}, fh, indent=2)
+    return 0
+
+
+def cmd_save_builtin(args) -> int:
+    save_npz(SCENES[args.name](), args.output)
+    print(f"wrote {args.output}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m ercuts_core", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("render", help="render a scene to EXR (+ PNG preview)")
+    r.add_argument("scene", help="path to a .npz description, or builtin:NAME")
+    r.add_argument("-o", "--output", required=True, help="output .exr path")
+    r.add_argument("--png", help="PNG preview path (default: beside the EXR)")
+    defaults = RenderSettings()
+    r.add_argument("--integrator", default=defaults.integrator)
+    r.add_argument("--samples", type=int, default=defaults.samples)
+    r.add_argument("--seed", type=int, default=defaults.seed)
+    r.add_argument("--max-depth", type=int, default=defaults.max_depth)
+    r.add_argument("--time-limit", type=float, default=0.0, help="seconds, 0 = none")
+    r.add_argument("--width", type=int)
+    r.add_argument("--height", type=int)
+    r.add_argument("--stats", help="write settings, timings and statistics as JSON here")
+    r.set_defaults(func=cmd_render)
+    s = sub.add_parser("save-builtin", help="save a built-in scene as .npz")
+    s.add_argument("name", choices=sorted(SCENES))
+    s.add_argument("output")
+    s.set_defaults(func=cmd_save_builtin)
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Integrators: each renders batches of camera samples into a :class:`~ercuts_core.film.Film`."""

@@ -1,0 +1,71 @@
+"""What all integrators share: camera-sample generation, first-hit AOVs, MIS helpers.
+
+An integrator is constructed with a :class:`~ercuts_core.scene.BuiltScene` and
+:class:`~ercuts_core.settings.RenderSettings` and renders one batch of camera samples at
+a time (``render_batch(film, pix, rng)``), so that the driver (:mod:`ercuts_core.render`)
+can honour the time limit and cancellation between batches.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..film import Film
+from ..scene import BuiltScene, Surface
+from ..settings import RenderSettings
+
+if TYPE_CHECKING:
+    from ..bsdf import Bsdf
+
+
+def dot(a: NDArray, b: NDArray) -> NDArray:
+    """Row-wise dot product of (N, 3) arrays."""
+    return np.einsum("ij,ij->i", a, b)
+
+
+def power_heuristic(pdf_a: NDArray, pdf_b: NDArray) -> NDArray:
+    """w_a = p_a² / (p_a² + p_b²) [Veach 1997 eq. 9.13, β = 2]; 0 where both are 0."""
+    a2, b2 = pdf_a * pdf_a, pdf_b * pdf_b
+    den = a2 + b2
+    return np.where(den > 0, a2 / np.where(den > 0, den, 1.0), 0.0)
+
+
+class Integrator:
+    """Base class: holds the scene and settings, makes camera rays, records AOVs."""
+
+    def __init__(self, scene: BuiltScene, settings: RenderSettings):
+        self.scene = scene
+        self.settings = settings
+        self.camera = scene.camera
+        self.window = scene.camera.window
+
+    def camera_rays(self, pix: NDArray, rng: np.random.Generator) -> tuple[NDArray, NDArray]:
+        """Jittered rays through window pixels ``pix`` (N,) (box filter)."""
+        w = self.window
+        raster = np.stack([w.x0 + pix % w.width, w.y0 + pix // w.width], axis=1).astype(np.float64)
+        raster += rng.random((len(pix), 2))
+        return self.camera.generate_rays(raster)
+
+    def record_first_hit(self, film: Film, pix: NDArray, surf: Surface, d: NDArray,
+                         bsdf: Bsdf | None) -> None:
+        """Depth (ray distance, Blender's Z pass), shading normal and albedo at the first hit."""
+        hit = surf.valid
+        depth = np.where(hit, surf.t, 1e10)[:, None]
+        normal = np.where(hit[:, None], surf.ns, 0.0)
+        film.add_aov("depth", pix, depth)
+        film.add_aov("normal", pix, normal)
+        if bsdf is not None:
+            albedo = np.zeros((len(pix), 3))
+            albedo[hit] = bsdf.albedo()
+            film.add_aov("albedo", pix, albedo)
+
+    def alpha(self, surf: Surface) -> NDArray:
+        """(N,) coverage: 1 for hits, and for misses unless the film is transparent."""
+        if self.settings.film_transparent:
+            return surf.valid.astype(np.float64)
+        return np.ones(len(surf.valid))
+
+    def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator) -> None:
+        raise NotImplementedError

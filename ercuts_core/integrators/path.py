@@ -1,0 +1,136 @@
+"""Reference unidirectional path tracer with next-event estimation and MIS (the oracle).
+
+Wavefront: all paths of a batch advance one bounce per iteration; each bounce is one
+``intersect`` call and one ``occluded`` call for the shadow rays. At every vertex the
+light is sampled (``LightSet.illuminate``) and the BSDF is sampled; emission found by a
+BSDF-sampled ray is weighted against next-event estimation with the power heuristic
+[Veach 1997 §9.2; pbrt-v3 PathIntegrator]. Lights that cannot be hit by rays (point,
+spot, sun, area) get MIS weight 1 in next-event estimation. Russian roulette starts after
+``rr_depth`` bounces with survival probability min(1, max(β)) [Arvo & Kirk 1990].
+
+Depth convention (pbrt): ``max_depth`` = number of scattering vertices; 1 = direct light.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..bsdf import Bsdf
+from ..film import Film
+from ..lights import AREA, POINT, SUN
+from .base import Integrator, dot, power_heuristic
+
+
+class PathIntegrator(Integrator):
+    """Path tracing with NEE + MIS; see the module docstring."""
+
+    def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator) -> None:
+        scene, s = self.scene, self.settings
+        lights, tracer = scene.lights, scene.tracer
+        n = len(pix)
+        o, d = self.camera_rays(pix, rng)
+        L = np.zeros((n, 3))
+        beta = np.ones((n, 3))
+        idx = np.arange(n)                 # lane → sample
+        prev_pdf = np.zeros(n)             # BSDF pdf of the ray that led here (0: camera ray)
+        prev_p = np.zeros((n, 3))
+        alpha = None
+        for depth in range(s.max_depth + 1):
+            surf = scene.intersect(o, d)
+            if depth == 0:
+                alpha = self.alpha(surf)
+            hit = surf.valid
+            # Emission seen by this ray: environment on misses, emissive triangles on hits.
+            if lights.env_light >= 0 and (~hit).any():
+                m = ~hit
+                Le = lights.env_radiance(int(m.sum()))
+                w = np.ones(int(m.sum())) if depth == 0 else power_heuristic(
+                    prev_pdf[m], lights.pdf_illuminate_env(int(m.sum())))
+                visible_env = not (depth == 0 and s.film_transparent)
+                if visible_env:
+                    L[idx[m]] += beta[m] * Le * w[:, None]
+            if hit.any() and len(lights.emissive_tris):
+                Le = scene.emission(surf)
+                em = hit & (Le.max(axis=1) > 0)
+                if em.any():
+                    w = np.ones(int(em.sum()))
+                    if depth > 0:
+                        pdf_l = lights.pdf_illuminate_tri(prev_p[em], surf.prim[em], surf.p[em], surf.ng[em])
+                        w = power_heuristic(prev_pdf[em], pdf_l)
+                    L[idx[em]] += beta[em] * Le[em] * w[:, None]
+            # Keep only paths that hit something and may scatter again.
+            if depth == s.max_depth:
+                if depth == 0:
+                    self.record_first_hit(film, pix, surf, d, None)
+                break
+            keep = np.flatnonzero(hit)
+            surf, d, beta, idx = surf.subset(keep), d[keep], beta[keep], idx[keep]
+            wo = -d
+            bsdf = Bsdf.from_table(scene.materials, surf.mat, surf.ns, surf.ng)
+            if depth == 0:
+                self._record(film, pix, keep, surf, bsdf)
+            if len(idx) == 0:
+                break
+            if not lights.empty:
+                L_nee = self._next_event(surf, wo, bsdf, rng)
+                L[idx] += beta * L_nee
+            # Sample the BSDF for the next bounce.
+            bs = bsdf.sample(wo, rng.random((len(idx), 3)))
+            beta = beta * bs.weight
+            alive = bs.valid & (beta.max(axis=1) > 0)
+            if depth + 1 >= s.rr_depth:
+                q = np.minimum(1.0, beta.max(axis=1))
+                survive = rng.random(len(idx)) < q
+                beta = beta / np.where(survive, q, 1.0)[:, None]
+                alive &= survive
+            keep = np.flatnonzero(alive)
+            if len(keep) == 0:
+                break
+            surf, beta, idx = surf.subset(keep), beta[keep], idx[keep]
+            d = bs.wi[keep]
+            prev_pdf, prev_p = bs.pdf[keep], surf.p
+            o = tracer.offset(surf.p, surf.ng, d)
+        film.add_samples(pix, L, alpha)
+
+    def _record(self, film: Film, pix: NDArray, keep: NDArray, surf, bsdf: Bsdf) -> None:
+        """First-hit AOVs (lanes without a hit get depth 1e10, zero normal and albedo)."""
+        n = len(pix)
+        depth = np.full((n, 1), 1e10)
+        normal = np.zeros((n, 3))
+        albedo = np.zeros((n, 3))
+        depth[keep, 0] = surf.t
+        normal[keep] = surf.ns
+        albedo[keep] = bsdf.albedo()
+        film.add_aov("depth", pix, depth)
+        film.add_aov("normal", pix, normal)
+        film.add_aov("albedo", pix, albedo)
+
+    def _next_event(self, surf, wo: NDArray, bsdf: Bsdf, rng: np.random.Generator) -> NDArray:
+        """(N, 3) direct light at the surfaces: f·|cos|·Li·V·w / pdf."""
+        lights, tracer = self.scene.lights, self.scene.tracer
+        n = len(wo)
+        ls = lights.illuminate(surf.p, rng.random(n), rng.random((n, 2)))
+        f = bsdf.eval(wo, ls.wi)
+        cos = np.abs(dot(surf.ns, ls.wi))
+        contrib = f * (cos / np.where(ls.valid, ls.pdf_w, 1.0))[:, None] * ls.Li
+        kind = lights.kind[ls.light]
+        nee_only = (kind == POINT) | (kind == SUN) | (kind == AREA)
+        w = np.where(nee_only, 1.0, power_heuristic(ls.pdf_w, bsdf.pdf(wo, ls.wi)))
+        contrib *= w[:, None]
+        test = ls.valid & (contrib.max(axis=1) > 0)
+        out = np.zeros((n, 3))
+        if test.any():
+            t = np.flatnonzero(test)
+            infinite = ~np.isfinite(ls.dist[t])
+            target = np.where(infinite[:, None], surf.p[t] + ls.wi[t] * 4.0 * self.scene.scene_radius, ls.p[t])
+            # Surface emitters (area, tri) need their end offset; points and infinite lights do not.
+            on_surface = ~infinite & (np.abs(ls.n[t]).sum(axis=1) > 0)
+            vis = np.empty(len(t), bool)
+            if on_surface.any():
+                a = np.flatnonzero(on_surface)
+                vis[a] = tracer.visible(surf.p[t[a]], surf.ng[t[a]], target[a], ls.n[t[a]])
+            if (~on_surface).any():
+                b = np.flatnonzero(~on_surface)
+                vis[b] = tracer.visible(surf.p[t[b]], surf.ng[t[b]], target[b], None)
+            out[t[vis]] = contrib[t[vis]]
+        return out

@@ -1,0 +1,148 @@
+"""The render driver: validate → build → integrate in passes → RenderResult.
+
+One *pass* renders one sample for every pixel of the window, in batches of pixels so
+that the time limit and the cancel callback are honoured at least once per batch (a
+batch is sized to take well under a second). The time limit covers the whole call:
+validation, building the acceleration structure and rendering. A pass that is cut short
+is discarded so that every pixel keeps the same sample count.
+"""
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import numpy as np
+
+from .description import SceneDescription
+from .film import Film
+from .integrators.base import Integrator
+from .result import RenderResult
+from .scene import BuiltScene
+from .settings import RenderSettings
+from .validate import sanitize
+
+Progress = Callable[[float, str], "bool | None"]
+
+
+def make_integrator(scene: BuiltScene, settings: RenderSettings) -> Integrator:
+    """The integrator named by ``settings.integrator``."""
+    if settings.integrator == "PATH":
+        from .integrators.path import PathIntegrator
+        return PathIntegrator(scene, settings)
+    from .integrators.bdpt import BDPTIntegrator
+    return BDPTIntegrator(scene, settings)
+
+
+class _Clock:
+    """Deadline and cancel bookkeeping shared by all phases."""
+
+    def __init__(self, time_limit: float, progress: Progress | None):
+        self.start = time.perf_counter()
+        self.deadline = self.start + time_limit if time_limit > 0 else None
+        self.progress = progress
+        self.cancelled = False
+
+    def expired(self) -> bool:
+        return self.deadline is not None and time.perf_counter() >= self.deadline
+
+    def report(self, fraction: float, message: str) -> bool:
+        """Call the progress callback; returns False (and remembers it) when cancelled."""
+        if self.progress is not None and self.progress(float(fraction), message) is False:
+            self.cancelled = True
+        if self.expired():
+            self.cancelled = True
+        return not self.cancelled
+
+
+def _batch_pixels(n_pixels: int, settings: RenderSettings, max_depth: int) -> int:
+    """Pixels per batch: about ``batch_rays`` rays per bounce."""
+    return int(max(1024, min(n_pixels, settings.batch_rays)))
+
+
+def render(desc: SceneDescription, settings: RenderSettings | None = None,
+           progress: Progress | None = None) -> RenderResult:
+    """Render ``desc`` with ``settings``.
+
+    Args:
+        desc: the scene description (validated here; see :mod:`ercuts_core.validate`).
+        settings: render settings (defaults if None).
+        progress: optional ``progress(fraction, message) -> bool | None``; returning False
+            cancels the render and the image rendered so far is returned.
+    Returns:
+        :class:`RenderResult` (image of the rendered window, top row first).
+    Raises:
+        SceneError: when the scene cannot be rendered (no camera, empty resolution, ...).
+    """
+    settings = settings or RenderSettings()
+    clock = _Clock(settings.time_limit, progress)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    checked = sanitize(desc)
+    timings["validate"] = time.perf_counter() - t0
+    clean = checked.desc
+    t0 = time.perf_counter()
+    scene = BuiltScene(clean, threads=settings.threads)
+    timings["build"] = time.perf_counter() - t0
+    window = scene.camera.window
+    film = Film(window)
+    stats: dict[str, float] = dict(checked.stats)
+    try:
+        if scene.lights.empty:
+            film.passes_done = settings.samples
+            _black_pass(film, scene, settings)
+        else:
+            _integrate(scene, settings, film, clock, timings)
+    finally:
+        stats["rays"] = scene.tracer.rays_traced
+        scene.close()
+    stats["samples"] = film.passes_done
+    stats["nonfinite_samples"] = film.nonfinite
+    timings["total"] = time.perf_counter() - clock.start
+    return RenderResult(
+        image=film.image(),
+        window=(window.x0, window.y0, window.width, window.height),
+        full_size=(scene.camera.width, scene.camera.height),
+        timings=timings, stats=stats, issues=checked.issues,
+        cancelled=clock.cancelled, aovs=film.aovs(),
+    )
+
+
+def _black_pass(film: Film, scene: BuiltScene, settings: RenderSettings) -> None:
+    """No lights: a black image with correct alpha (coverage) and no light transport."""
+    n = film.window.n_pixels
+    if settings.film_transparent:
+        # Coverage still needs primary rays; one pass suffices for the alpha.
+        from .integrators.base import Integrator
+        integ = Integrator(scene, settings)
+        pix = np.arange(n)
+        o, d = integ.camera_rays(pix, np.random.default_rng(settings.seed))
+        film.alpha[:] = scene.intersect(o, d).valid * float(film.passes_done)
+    else:
+        film.alpha[:] = float(film.passes_done)
+
+
+def _integrate(scene: BuiltScene, settings: RenderSettings, film: Film, clock: _Clock,
+               timings: dict[str, float]) -> None:
+    """Run passes until ``samples`` are done, the deadline passes or the user cancels.
+
+    Each pass renders into its own film and is merged when complete; a pass cut short is
+    kept only when it is the first (so a cancelled render still shows what was done).
+    """
+    integrator = make_integrator(scene, settings)
+    n = film.window.n_pixels
+    batch = _batch_pixels(n, settings, settings.max_depth)
+    t0 = time.perf_counter()
+    label = settings.integrator
+    for k in range(settings.samples):
+        part = Film(film.window)
+        for start in range(0, n, batch):
+            rng = np.random.default_rng([settings.seed, k, start])
+            integrator.render_batch(part, np.arange(start, min(n, start + batch)), rng)
+            done = (k + min(n, start + batch) / n) / settings.samples
+            if not clock.report(done, f"{label} sample {k + 1}/{settings.samples}"):
+                break
+        if not clock.cancelled or film.passes_done == 0:
+            film.merge(part)
+        if clock.cancelled:
+            break
+    timings["render"] = time.perf_counter() - t0

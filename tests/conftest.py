@@ -1,0 +1,9 @@
+"""Shared fixtures: the repository root on sys.path and small scene builders."""
+from __future__ import annotations
+
+import os
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if ROOT not in sys.path:
+    sys.path.insert(0, ROOT)

@@ -1,0 +1,74 @@
+"""Tracer: batched queries, embreex conventions and self-intersection offsets near and far."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ercuts_core.tracer import Tracer
+
+
+def plane(center, size=1.0):
+    c = np.asarray(center, float)
+    v = np.array([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], float) * size + c
+    return v.astype(np.float32), np.array([[0, 2, 1], [0, 3, 2]], np.int32)
+
+
+def test_intersect_hits_and_misses():
+    tr = Tracer(*plane((0, 0, 0)))
+    o = np.array([[0.2, 1, 0.3], [5, 1, 5]])
+    d = np.array([[0, -1, 0], [0, -1, 0]], float)
+    hit = tr.intersect(o, d)
+    assert list(hit.valid) == [True, False]
+    assert hit.t[0] == pytest.approx(1.0, abs=1e-6) and np.isinf(hit.t[1])
+
+
+def test_occluded_convention():
+    tr = Tracer(*plane((0, 0, 0)))
+    o = np.array([[0, 1, 0], [0, 1, 0]], float)
+    d = np.array([[0, -1, 0], [0, 1, 0]], float)
+    assert list(tr.occluded(o, d, np.array([2.0, 2.0]))) == [True, False]
+    assert not tr.occluded(o[:1], d[:1], np.array([0.5]))[0]  # segment ends before the plane
+
+
+@pytest.mark.parametrize("scale,center", [(1.0, 0.0), (1.0, 1e4), (100.0, 1e4), (0.01, 10.0)])
+def test_offsets_avoid_self_intersection_far_from_origin(scale, center):
+    """Rays leaving a surface at 1e4 m never re-hit it, on either side and at grazing angles."""
+    pos, tris = plane((center, center, center), size=scale)
+    tr = Tracer(pos, tris)
+    rng = np.random.default_rng(1)
+    n = 20000
+    p = np.c_[rng.uniform(-0.9, 0.9, n) * scale + center, np.full(n, center),
+              rng.uniform(-0.9, 0.9, n) * scale + center]
+    ng = np.tile([0.0, 1.0, 0.0], (n, 1))
+    d = rng.normal(size=(n, 3))
+    d[:, 1] = np.sign(d[:, 1]) * np.maximum(np.abs(d[:, 1]), 1e-3)  # down to grazing
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o = tr.offset(p, ng, d)
+    assert not tr.intersect(o, d).valid.any()
+    # Visibility between pairs of points on the same plane is never blocked by the plane.
+    q = np.roll(p, 1, axis=0)
+    assert tr.visible(p, ng, q, ng).all()
+
+
+def test_visibility_blocked_by_a_wall_far_from_origin():
+    c = 1e4
+    pos1, t1 = plane((c, c, c))
+    wall = np.array([[c - 2, c + 0.5, c - 2], [c + 2, c + 0.5, c - 2], [c + 2, c + 0.5, c + 2],
+                     [c - 2, c + 0.5, c + 2]], np.float32)
+    tr = Tracer(np.vstack([pos1, wall]), np.vstack([t1, t1 + 4]))
+    p = np.array([[c, c, c]])
+    ng = np.array([[0.0, 1.0, 0.0]])
+    assert not tr.visible(p, ng, p + [[0, 1.0, 0]], None)[0]
+    assert tr.visible(p, ng, p + [[0, 0.4, 0]], None)[0]
+
+
+def test_large_batches_are_split_across_threads_consistently():
+    tr = Tracer(*plane((0, 0, 0)), threads=2)
+    rng = np.random.default_rng(0)
+    n = 100_000
+    o = np.c_[rng.uniform(-2, 2, n), np.ones(n), rng.uniform(-2, 2, n)]
+    d = np.tile([0.0, -1.0, 0.0], (n, 1))
+    hit = tr.intersect(o, d)
+    expect = (np.abs(o[:, 0]) < 1) & (np.abs(o[:, 2]) < 1)
+    assert (hit.valid == expect).mean() > 0.9999
+    assert tr.rays_traced == n

@@ -1,0 +1,35 @@
+"""Ercuts: a Blender render engine backed by the pure-Python ``ercuts_core``.
+
+The add-on turns Blender's evaluated scene into an ``ercuts_core.SceneDescription``
+(:mod:`.export`), renders it with ``ercuts_core.render`` and writes the image into
+Blender's render result (:mod:`.engine`, :mod:`.framebuffer`). Settings live in
+``scene.ercuts`` (:mod:`.properties`), panels in :mod:`.ui`, and every Blender-version
+difference in :mod:`.compat`. Only relative imports are used inside the package, so it
+can be installed under any name; the core is imported as the top-level package
+``ercuts_core`` (with numpy and embreex) only when a render starts, so the add-on
+registers even where those are missing and then reports it when rendering.
+"""
+
+bl_info = {
+    "name": "Ercuts",
+    "author": "Ercuts project",
+    "version": (0, 1, 0),
+    "blender": (3, 4, 0),
+    "location": "Properties > Render > Render Engine > Ercuts",
+    "description": "Render engine for scenes lit mostly by indirect light (BDPT, path tracing)",
+    "category": "Render",
+}
+
+from . import engine, properties, ui  # noqa: E402
+
+_modules = (properties, engine, ui)
+
+
+def register():
+    for module in _modules:
+        module.register()
+
+
+def unregister():
+    for module in reversed(_modules):
+        module.unregister()

@@ -1,0 +1,171 @@
+"""Every Blender-version branch of the add-on, in one place.
+
+The rest of the add-on calls these helpers instead of testing ``bpy.app.version``
+itself, so supporting a new Blender release means editing this file only. Facts and
+their sources are in the shared docs, ``blender.md`` (§0, §2.3, §3, §7); the ones
+below were verified on Blender 3.4.1 and bpy 5.0.1.
+
+numpy is imported inside the functions that need it, so that the add-on registers
+even in a Blender whose Python lacks numpy (the engine then reports the missing
+dependency when asked to render).
+"""
+from __future__ import annotations
+
+import math
+
+import bpy
+
+VERSION: tuple[int, int, int] = tuple(bpy.app.version)
+
+#: ``RenderPass.rect.foreach_set`` takes a flat array from 4.1 on, (N, channels) before.
+RECT_IS_FLAT = VERSION >= (4, 1, 0)
+#: ``Mesh.corner_normals`` replaced ``calc_normals_split()`` + ``loops.normal`` in 4.1.
+HAS_CORNER_NORMALS = VERSION >= (4, 1, 0)
+#: Principled BSDF sockets were renamed in 4.0 (Emission → Emission Color, …).
+PRINCIPLED_V4 = VERSION >= (4, 0, 0)
+#: ``Material.use_nodes``/``World.use_nodes`` are deprecated (always True) from 5.0 on.
+USE_NODES_DEPRECATED = VERSION >= (5, 0, 0)
+#: Area lights: L = P/(π·A) from 4.0 on, P/(4·A) before (Cycles commit a21af93e6).
+AREA_LIGHT_PI_NORMALISATION = VERSION >= (4, 0, 0)
+
+
+# --------------------------------------------------------------------------- render result
+
+def rect_set(render_pass, pixels) -> None:
+    """Write (N, channels) float pixels (row 0 = bottom) into ``render_pass.rect``."""
+    import numpy as np
+
+    a = np.ascontiguousarray(pixels, dtype=np.float32).reshape(-1, render_pass.channels)
+    if RECT_IS_FLAT:
+        render_pass.rect.foreach_set(a.reshape(-1))
+    else:
+        render_pass.rect.foreach_set(a)
+
+
+def set_multilayer_exr(image_settings) -> None:
+    """Switch ``image_settings`` to multilayer OpenEXR (5.0 needs ``media_type`` first)."""
+    if hasattr(image_settings, "media_type"):
+        image_settings.media_type = "MULTI_LAYER_IMAGE"
+    image_settings.file_format = "OPEN_EXR_MULTILAYER"
+
+
+def set_single_layer_exr(image_settings) -> None:
+    """Switch ``image_settings`` to single-layer OpenEXR (5.0: media type IMAGE first)."""
+    if hasattr(image_settings, "media_type"):
+        image_settings.media_type = "IMAGE"
+    image_settings.file_format = "OPEN_EXR"
+
+
+# --------------------------------------------------------------------------- meshes
+
+def corner_normals(mesh):
+    """(n_loops, 3) float32 shading normal of every face corner.
+
+    Smooth faces get the interpolated (or custom/auto-smooth split) normal, flat faces
+    their face normal, matching what Cycles renders.
+    """
+    import numpy as np
+
+    n = np.empty(len(mesh.loops) * 3, np.float32)
+    if HAS_CORNER_NORMALS:
+        mesh.corner_normals.foreach_get("vector", n)
+    else:
+        mesh.calc_normals_split()
+        mesh.loops.foreach_get("normal", n)
+    return n.reshape(-1, 3)
+
+
+# --------------------------------------------------------------------------- node trees
+
+def uses_nodes(idblock) -> bool:
+    """True when a material/world/light renders through its node tree.
+
+    On 5.0 ``use_nodes`` is deprecated for materials and worlds (always True, reading
+    it warns), so only the presence of a tree counts there.
+    """
+    if getattr(idblock, "node_tree", None) is None:
+        return False
+    if USE_NODES_DEPRECATED and isinstance(idblock, (bpy.types.Material, bpy.types.World)):
+        return True
+    return bool(idblock.use_nodes)
+
+
+def enable_nodes(idblock) -> None:
+    """Make a new material/world/light use a node tree (no-op where that is the default)."""
+    if USE_NODES_DEPRECATED and isinstance(idblock, (bpy.types.Material, bpy.types.World)):
+        return
+    idblock.use_nodes = True
+
+
+#: Principled BSDF input names per concept: (4.x/5.x name, 3.x name).
+_PRINCIPLED = {
+    "base_color": ("Base Color", "Base Color"),
+    "roughness": ("Roughness", "Roughness"),
+    "metallic": ("Metallic", "Metallic"),
+    "specular": ("Specular IOR Level", "Specular"),
+    "ior": ("IOR", "IOR"),
+    "emission_color": ("Emission Color", "Emission"),
+    "emission_strength": ("Emission Strength", "Emission Strength"),
+    "alpha": ("Alpha", "Alpha"),
+    "transmission": ("Transmission Weight", "Transmission"),
+    "coat": ("Coat Weight", "Clearcoat"),
+    "sheen": ("Sheen Weight", "Sheen"),
+    "subsurface": ("Subsurface Weight", "Subsurface"),
+    "normal": ("Normal", "Normal"),
+}
+
+
+def principled_input(node, concept: str):
+    """The Principled BSDF input socket for ``concept`` (see ``_PRINCIPLED``), or None."""
+    new, old = _PRINCIPLED[concept]
+    return node.inputs.get(new if PRINCIPLED_V4 else old)
+
+
+def principled_socket_name(concept: str) -> str:
+    """This Blender's Principled BSDF input name for ``concept`` (for building scenes)."""
+    new, old = _PRINCIPLED[concept]
+    return new if PRINCIPLED_V4 else old
+
+
+def principled_specular(specular: float, ior: float) -> float:
+    """The core's ``specular`` (F0 = 0.08·specular) from Principled inputs.
+
+    3.x: F0 = 0.08·Specular directly. 4.0+: F0 = ((ior−1)/(ior+1))²·2·IOR Level, so
+    IOR 1.5 and level 0.5 give the same F0 = 0.04 as 3.x's default 0.5.
+    """
+    if not PRINCIPLED_V4:
+        return float(specular)
+    f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * specular
+    return float(f0 / 0.08)
+
+
+# --------------------------------------------------------------------------- lights
+
+def light_exposure_scale(light) -> float:
+    """2**exposure (4.0+; 1 on 3.x, which has no light exposure)."""
+    return 2.0 ** float(getattr(light, "exposure", 0.0))
+
+
+def light_temperature_rgb(light) -> tuple[float, float, float]:
+    """Blackbody tint when ``use_temperature`` is on (4.5+), else white."""
+    if getattr(light, "use_temperature", False):
+        return tuple(float(c) for c in light.temperature_color)
+    return (1.0, 1.0, 1.0)
+
+
+def area_light_radiance_scale(light, area: float) -> float:
+    """Factor turning an area light's colour·power·2^exposure into radiance [W/(sr·m²)].
+
+    ≥ 4.0: 1/(π·A), or 1/π when ``normalize`` is off (size no longer divides power);
+    3.x: 1/(4·A) (the pre-4.0 Cycles conversion).
+    """
+    if AREA_LIGHT_PI_NORMALISATION:
+        if not getattr(light, "normalize", True):
+            return 1.0 / math.pi
+        return 1.0 / (math.pi * area)
+    return 1.0 / (4.0 * area)
+
+
+def world_override(view_layer):
+    """``view_layer.world_override`` (5.0) or None (3.x has none)."""
+    return getattr(view_layer, "world_override", None)

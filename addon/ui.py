@@ -1,0 +1,246 @@
+"""Properties-editor panels for the Ercuts engine.
+
+Own panels show ``scene.ercuts`` (Render tab) and the material, world and light
+settings the exporter reads. Blender's generic panels (Format, Output, Frame Range,
+Color Management, camera lens, …) are made visible for the engine the way Cycles
+does it (``cycles/ui.py get_panels``): every panel whose ``COMPAT_ENGINES`` contains
+'BLENDER_RENDER', minus the ones replaced here, gets 'ERCUTS' added; unregister takes
+it out again.
+"""
+from __future__ import annotations
+
+import bpy
+
+from . import compat
+
+ENGINE_ID = "ERCUTS"
+
+#: Blender panels replaced by our own (the light panels) or meaningless for Ercuts.
+_EXCLUDE_PANELS = {
+    "DATA_PT_light",
+    "DATA_PT_area",
+    "DATA_PT_spot",
+    "DATA_PT_falloff_curve",
+    "NODE_DATA_PT_light",
+    "VIEWLAYER_PT_layer_passes",
+    "VIEWLAYER_PT_filter",
+}
+#: EEVEE-only panels that are also right for Ercuts (material slots and previews).
+_EXTRA_PANELS = {
+    "MATERIAL_PT_preview",
+    "EEVEE_MATERIAL_PT_context_material",
+    "WORLD_PT_context_world",
+}
+
+#: Panels we added ENGINE_ID to, so unregister() can undo exactly that.
+_patched_panels: list[type] = []
+
+
+def get_panels():
+    """Blender panel classes to show for Ercuts (Cycles' ``get_panels`` pattern)."""
+    panels = []
+    for panel in bpy.types.Panel.__subclasses__():
+        engines = getattr(panel, "COMPAT_ENGINES", None)
+        if engines is None or panel.__name__ in _EXCLUDE_PANELS:
+            continue
+        if "BLENDER_RENDER" in engines or panel.__name__ in _EXTRA_PANELS:
+            panels.append(panel)
+    return panels
+
+
+class ErcutsPanel:
+    """Mix-in: poll only for the Ercuts engine."""
+
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    COMPAT_ENGINES = {ENGINE_ID}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+
+# --------------------------------------------------------------------------- render tab
+
+class ERCUTS_RENDER_PT_sampling(ErcutsPanel, bpy.types.Panel):
+    bl_label = "Sampling"
+    bl_context = "render"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        settings = context.scene.ercuts
+        layout.prop(settings, "integrator")
+        col = layout.column(align=True)
+        col.prop(settings, "samples")
+        col.prop(settings, "seed")
+        layout.prop(settings, "time_limit")
+
+
+class ERCUTS_RENDER_PT_light_paths(ErcutsPanel, bpy.types.Panel):
+    bl_label = "Light Paths"
+    bl_context = "render"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        settings = context.scene.ercuts
+        col = layout.column(align=True)
+        col.prop(settings, "max_depth")
+        col.prop(settings, "rr_depth")
+
+
+class ERCUTS_RENDER_PT_film(ErcutsPanel, bpy.types.Panel):
+    bl_label = "Film"
+    bl_context = "render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(context.scene.ercuts, "film_transparent")
+
+
+class ERCUTS_RENDER_PT_performance(ErcutsPanel, bpy.types.Panel):
+    bl_label = "Performance"
+    bl_context = "render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        settings = context.scene.ercuts
+        layout.prop(settings, "threads")
+        layout.prop(settings, "batch_rays")
+
+
+# --------------------------------------------------------------------------- material / world
+
+def _draw_node_view(layout, id_block, output_type: str, input_name: str) -> None:
+    """Cycles' ``panel_node_draw``: the node tree as nested sockets, or a 'Use Nodes' button."""
+    if not compat.uses_nodes(id_block):
+        layout.prop(id_block, "use_nodes", icon="NODETREE")
+        return
+    ntree = id_block.node_tree
+    node = ntree.get_output_node("CYCLES") or ntree.get_output_node("ALL")
+    if node is None:
+        layout.label(text="No output node")
+        return
+    socket = node.inputs.get(input_name)
+    if socket is None:
+        layout.label(text=f"No {input_name} input")
+        return
+    layout.template_node_view(ntree, node, socket)
+
+
+class ERCUTS_MATERIAL_PT_surface(ErcutsPanel, bpy.types.Panel):
+    bl_label = "Surface"
+    bl_context = "material"
+
+    @classmethod
+    def poll(cls, context):
+        return context.material is not None and super().poll(context)
+
+    def draw(self, context):
+        mat = context.material
+        if compat.uses_nodes(mat):
+            _draw_node_view(self.layout, mat, "OUTPUT_MATERIAL", "Surface")
+        else:
+            layout = self.layout
+            layout.use_property_split = True
+            if not compat.USE_NODES_DEPRECATED:
+                layout.prop(mat, "use_nodes", icon="NODETREE")
+            layout.prop(mat, "diffuse_color", text="Color")
+
+
+class ERCUTS_WORLD_PT_surface(ErcutsPanel, bpy.types.Panel):
+    bl_label = "Surface"
+    bl_context = "world"
+
+    @classmethod
+    def poll(cls, context):
+        return context.world is not None and super().poll(context)
+
+    def draw(self, context):
+        world = context.world
+        if compat.uses_nodes(world):
+            _draw_node_view(self.layout, world, "OUTPUT_WORLD", "Surface")
+        else:
+            layout = self.layout
+            layout.use_property_split = True
+            if not compat.USE_NODES_DEPRECATED:
+                layout.prop(world, "use_nodes", icon="NODETREE")
+            layout.prop(world, "color")
+
+
+# --------------------------------------------------------------------------- light
+
+class ERCUTS_LIGHT_PT_light(ErcutsPanel, bpy.types.Panel):
+    bl_label = "Light"
+    bl_context = "data"
+
+    @classmethod
+    def poll(cls, context):
+        return context.light is not None and super().poll(context)
+
+    def draw(self, context):
+        light = context.light
+        layout = self.layout
+        layout.row().prop(light, "type", expand=True)
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column()
+        col.prop(light, "color")
+        col.prop(light, "energy")
+        for extra in ("exposure", "normalize"):
+            if hasattr(light, extra) and not (extra == "normalize" and light.type != "AREA"):
+                col.prop(light, extra)
+        if light.type in {"POINT", "SPOT"}:
+            col.prop(light, "shadow_soft_size", text="Radius")
+        elif light.type == "SUN":
+            col.prop(light, "angle")
+        elif light.type == "AREA":
+            col.prop(light, "shape")
+            sub = col.column(align=True)
+            if light.shape in {"SQUARE", "DISK"}:
+                sub.prop(light, "size")
+            else:
+                sub.prop(light, "size", text="Size X")
+                sub.prop(light, "size_y", text="Y")
+        if light.type == "SPOT":
+            col.separator()
+            col.prop(light, "spot_size", text="Spot Size")
+            col.prop(light, "spot_blend", text="Blend")
+            col.prop(light, "show_cone")
+
+
+classes = (
+    ERCUTS_RENDER_PT_sampling,
+    ERCUTS_RENDER_PT_light_paths,
+    ERCUTS_RENDER_PT_film,
+    ERCUTS_RENDER_PT_performance,
+    ERCUTS_MATERIAL_PT_surface,
+    ERCUTS_WORLD_PT_surface,
+    ERCUTS_LIGHT_PT_light,
+)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    for panel in get_panels():
+        if ENGINE_ID not in panel.COMPAT_ENGINES:
+            panel.COMPAT_ENGINES.add(ENGINE_ID)
+            _patched_panels.append(panel)
+
+
+def unregister():
+    for panel in _patched_panels:
+        panel.COMPAT_ENGINES.discard(ENGINE_ID)
+    _patched_panels.clear()
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

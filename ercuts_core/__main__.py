@@ -41,7 +41,7 @@ def _progress_bar():
     """A tqdm progress callback (fraction, message) -> None."""
     from tqdm import tqdm
 
-    bar = tqdm(total=1000, unit="‰", file=sys.stderr, dynamic_ncols=True, leave=True)
+    bar = tqdm(total=1000, unit="‰", file=sys.stderr, dynamic_ncols=True, leave=True, mininterval=1.0)
 
     def progress(fraction: float, message: str):
         bar.n = int(fraction * 1000)

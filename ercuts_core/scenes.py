@@ -119,7 +119,7 @@ def s_corridor(width: int = 160, height: int = 120) -> SceneDescription:
     light = b.object("LightPanel")
     b.quad((0.01, 0.8, 0.5), (0.01, 0.8, 1.5), (0.01, 1.8, 1.5), (0.01, 1.8, 0.5), lamp, light)
     mats = MaterialTable(["Wall", "Lamp"], [[0.75, 0.75, 0.75], [0.8, 0.8, 0.8]], [1, 1], [0, 0],
-                         [0, 0], [[0, 0, 0], [60.0, 56.0, 48.0]])
+                         [0, 0], [[0, 0, 0], [1500.0, 1400.0, 1200.0]])
     cam = _camera((5.9, 1.25, 5.0), (0.0, 1.25, 5.0), width, height, lens=20.0)
     return SceneDescription(b.mesh(), mats, cam, object_names=tuple(b.names))
 

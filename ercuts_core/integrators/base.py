@@ -27,9 +27,10 @@ def dot(a: NDArray, b: NDArray) -> NDArray:
 
 def power_heuristic(pdf_a: NDArray, pdf_b: NDArray) -> NDArray:
     """w_a = p_a² / (p_a² + p_b²) [Veach 1997 eq. 9.13, β = 2]; 0 where both are 0."""
-    a2, b2 = pdf_a * pdf_a, pdf_b * pdf_b
-    den = a2 + b2
-    return np.where(den > 0, a2 / np.where(den > 0, den, 1.0), 0.0)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        r = pdf_b / pdf_a                      # computed as a ratio: no overflow of p²
+        w = 1.0 / (1.0 + r * r)
+    return np.where((pdf_a > 0) & np.isfinite(w), w, np.where(np.isinf(pdf_a) & (pdf_a > 0), 1.0, 0.0))
 
 
 class Integrator:

@@ -1,0 +1,184 @@
+"""Evaluated depsgraph → ``ercuts_core.description.SceneDescription``.
+
+:func:`export_scene` walks ``depsgraph.object_instances`` once: every visible
+mesh-like object (modifiers, geometry nodes and instancing already applied by the
+depsgraph) is read once per distinct evaluated mesh and placed once per instance
+with a copy of its world matrix; lights go to :mod:`.lights`; materials are
+collected on first use (:mod:`.materials`); the camera and world come from the scene.
+Nothing here touches bpy outside the calling thread, and the result is plain numpy.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .camera import CameraExportError, camera_desc, render_size
+from .lights import LightCollector
+from .materials import MaterialCollector
+from .mesh import GEOMETRY_TYPES, read_mesh, transform_mesh
+from .world import world_radiance
+
+__all__ = ["ExportCancelled", "ExportError", "ExportResult", "export_scene", "render_size"]
+
+
+class ExportError(Exception):
+    """The scene cannot be rendered; the message is meant for the user."""
+
+
+class ExportCancelled(Exception):
+    """``should_stop`` asked to abandon the export."""
+
+
+@dataclass
+class ExportResult:
+    """What :func:`export_scene` produced.
+
+    Attributes:
+        description: the scene for the core.
+        warnings: user-facing messages about things that were ignored or approximated.
+        has_emitters: False when nothing emits light (no lights, emissive materials or world).
+        seconds: time spent exporting.
+        stats: counts, e.g. {'triangles': .., 'instances': .., 'meshes': ..}.
+    """
+
+    description: object
+    warnings: list[str] = field(default_factory=list)
+    has_emitters: bool = True
+    seconds: float = 0.0
+    stats: dict = field(default_factory=dict)
+
+
+def _instance_name(inst) -> str:
+    name = inst.object.name
+    if inst.is_instance and inst.parent is not None:
+        return f"{inst.parent.name}/{name}"
+    return name
+
+
+def _mesh_key(ob):
+    """Instances of the same evaluated geometry share one key (and one read)."""
+    if ob.type == "MESH" and ob.data is not None:
+        return ("ME", ob.data.as_pointer())
+    return ("OB", ob.original.name_full, ob.data.as_pointer() if ob.data is not None else 0)
+
+
+def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
+                 require_camera=True, should_stop=None) -> ExportResult:
+    """Export the evaluated scene of ``depsgraph`` (its view layer) for the core.
+
+    Args:
+        camera_override: camera object to use instead of ``scene.camera``.
+        size: full-frame (width, height) in pixels; default resolution × percentage.
+        use_border: override ``render.use_border``.
+        require_camera: raise :class:`ExportError` when there is no camera (else camera=None).
+        should_stop: callable polled during the export; True raises :class:`ExportCancelled`.
+    """
+    from ercuts_core.description import MeshTable, SceneDescription
+
+    t0 = time.monotonic()
+    scene = depsgraph.scene
+    view_layer = depsgraph.view_layer
+    warnings: list[str] = []
+
+    # ---------------------------------------------------------------- camera
+    cam_obj = camera_override if camera_override is not None else scene.camera
+    if cam_obj is not None:
+        cam_obj = cam_obj.evaluated_get(depsgraph)
+    camera = None
+    if cam_obj is not None or require_camera:
+        try:
+            camera, cam_warnings = camera_desc(scene, cam_obj, size, use_border)
+            warnings += cam_warnings
+        except CameraExportError as exc:
+            raise ExportError(str(exc)) from None
+
+    # ---------------------------------------------------------------- objects
+    materials = MaterialCollector(override=getattr(view_layer, "material_override", None))
+    lights = LightCollector()
+    names: list[str] = []
+    local_cache: dict = {}
+    parts = dict(positions=[], triangles=[], normals=[], smooth=[], material_ids=[], object_ids=[])
+    n_vertices = 0
+    n_instances = 0
+    for count, inst in enumerate(depsgraph.object_instances):
+        if should_stop is not None and count % 1000 == 999 and should_stop():
+            raise ExportCancelled()
+        ob = inst.object
+        if ob.original.hide_render:
+            continue
+        if ob.type == "LIGHT":
+            names.append(_instance_name(inst))
+            lights.add(ob.data, np.array(inst.matrix_world, np.float64), len(names) - 1, ob.name)
+            continue
+        if ob.type not in GEOMETRY_TYPES or not inst.show_self:
+            continue
+        key = _mesh_key(ob)
+        local = local_cache.get(key)
+        if local is None:
+            mesh = ob.to_mesh()
+            try:
+                local = read_mesh(mesh) if mesh is not None else None
+            finally:
+                ob.to_mesh_clear()
+            local_cache[key] = local
+        if local is None or local.n_triangles == 0:
+            continue
+        placed = transform_mesh(local, np.array(inst.matrix_world, np.float64))  # copy now
+        if placed is None:
+            continue
+        slot_rows = materials.slot_table(ob)
+        names.append(_instance_name(inst))
+        n_instances += 1
+        parts["positions"].append(placed.positions)
+        parts["normals"].append(placed.normals)
+        parts["triangles"].append(placed.triangles + n_vertices)
+        parts["smooth"].append(local.smooth)
+        parts["material_ids"].append(slot_rows[np.clip(local.slots, 0, len(slot_rows) - 1)])
+        parts["object_ids"].append(np.full(local.n_triangles, len(names) - 1, np.int32))
+        n_vertices += len(placed.positions)
+
+    # ---------------------------------------------------------------- assemble
+    def cat(key, tail, dtype):
+        chunks = parts[key]
+        return np.concatenate(chunks).astype(dtype) if chunks else np.zeros((0, *tail), dtype)
+
+    smooth = cat("smooth", (), bool)
+    any_smooth = bool(smooth.any())
+    mesh_table = MeshTable(
+        positions=cat("positions", (3,), np.float32),
+        triangles=cat("triangles", (3,), np.int32),
+        material_ids=cat("material_ids", (), np.int32),
+        object_ids=cat("object_ids", (), np.int32),
+        normals=cat("normals", (3,), np.float32) if any_smooth else None,
+        smooth=smooth if any_smooth else None,
+    )
+    material_table = materials.table()
+    points, suns, areas = lights.tables()
+    world = scene.world
+    override = getattr(view_layer, "world_override", None)
+    if override is not None:
+        world = override
+    radiance, world_warnings = world_radiance(world)
+
+    warnings += materials.warnings + lights.warnings + world_warnings
+    if scene.render.use_motion_blur:
+        warnings.append("motion blur ignored")
+
+    used = np.unique(mesh_table.material_ids)
+    emissive_mesh = bool(len(used) and (material_table.emission[used] > 0).any())
+    has_emitters = bool(len(points) or len(suns) or len(areas) or emissive_mesh
+                        or (radiance > 0).any())
+    desc = SceneDescription(
+        mesh=mesh_table, materials=material_table, camera=camera,
+        point_lights=points, sun_lights=suns, area_lights=areas,
+        world_radiance=radiance, object_names=tuple(names),
+    )
+    return ExportResult(
+        description=desc, warnings=warnings, has_emitters=has_emitters,
+        seconds=time.monotonic() - t0,
+        stats=dict(triangles=mesh_table.n_triangles, instances=n_instances,
+                   meshes=sum(v is not None for v in local_cache.values()),
+                   lights=len(points) + len(suns) + len(areas)),
+    )

@@ -1,0 +1,208 @@
+"""Blender materials → rows of the core's ``MaterialTable``.
+
+Supported surface shaders, with socket names of both Blender 3.x and 4.x/5.x
+(``compat.principled_input``): Principled BSDF (base colour, roughness, metallic,
+specular, emission colour × strength), Diffuse BSDF and Emission. Inputs may be
+constant or linked to an RGB/Value node (through reroutes). Anything else (other
+shader nodes, textures, groups) gives *one* warning naming the material, and a
+fallback: the socket's own value for a linked input, grey diffuse for an unsupported
+shader. Materials without a node tree render their viewport colour as a diffuse,
+like Cycles; objects without a material get Cycles' default grey diffuse.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import compat
+
+#: Cycles' default surface (objects without material, unsupported shaders): grey diffuse.
+DEFAULT_GREY = (0.8, 0.8, 0.8)
+DEFAULT_MATERIAL_NAME = "<default surface>"
+
+
+@dataclass
+class MaterialRow:
+    """One row of the MaterialTable (see ``ercuts_core.description.MaterialTable``)."""
+
+    name: str
+    base_color: tuple = DEFAULT_GREY
+    roughness: float = 1.0
+    metallic: float = 0.0
+    specular: float = 0.0
+    emission: tuple = (0.0, 0.0, 0.0)
+
+    @property
+    def is_emissive(self) -> bool:
+        return max(self.emission) > 0.0
+
+
+@dataclass
+class _Reader:
+    """Reads one material's node tree and collects what it could not translate."""
+
+    name: str
+    notes: list = field(default_factory=list)
+
+    def note(self, text: str) -> None:
+        if text not in self.notes:
+            self.notes.append(text)
+
+    def value(self, socket, default=None):
+        """Constant value of an input socket: its own value, or an RGB/Value node's."""
+        if socket is None:
+            return default
+        node, out = follow_link(socket)
+        if node is None:
+            return _plain(socket.default_value)
+        if node.bl_idname in {"ShaderNodeRGB", "ShaderNodeValue"}:
+            return _plain(out.default_value)
+        self.note(f"input '{socket.name}' linked to unsupported node '{node.name}' "
+                  f"({node.bl_idname}), using the input's own value")
+        return _plain(socket.default_value)
+
+    def color(self, socket, default=DEFAULT_GREY) -> tuple:
+        v = self.value(socket, default)
+        return tuple(float(c) for c in v[:3])
+
+    def scalar(self, socket, default=0.0) -> float:
+        v = self.value(socket, default)
+        return float(v if np.ndim(v) == 0 else np.mean(v[:3]))
+
+
+def _plain(value):
+    """bpy float arrays → tuples, floats stay floats."""
+    try:
+        return tuple(value)
+    except TypeError:
+        return float(value)
+
+
+def follow_link(socket):
+    """(node, output socket) feeding ``socket``, skipping reroutes; (None, None) if unlinked/muted."""
+    seen = 0
+    while socket is not None and socket.is_linked and seen < 64:
+        seen += 1
+        link = socket.links[0]
+        if getattr(link, "is_muted", False) or not link.is_valid:
+            return None, None
+        node = link.from_node
+        if node.bl_idname == "NodeReroute":
+            socket = node.inputs[0]
+            continue
+        return node, link.from_socket
+    return None, None
+
+
+def output_node(node_tree):
+    """The active output node Cycles would use (``get_output_node`` exists on 3.x and 5.x)."""
+    return node_tree.get_output_node("CYCLES") or node_tree.get_output_node("ALL")
+
+
+def read_material(mat) -> tuple[MaterialRow, list[str]]:
+    """One material's row, and the list of things that could not be translated."""
+    reader = _Reader(mat.name)
+    if not compat.uses_nodes(mat):
+        row = MaterialRow(mat.name, base_color=tuple(float(c) for c in mat.diffuse_color[:3]))
+        return row, reader.notes
+    out = output_node(mat.node_tree)
+    if out is None:
+        reader.note("no material output node")
+        return MaterialRow(mat.name, base_color=(0.0, 0.0, 0.0)), reader.notes
+    surface, _ = follow_link(out.inputs.get("Surface"))
+    if surface is None:  # nothing connected: Cycles renders black
+        return MaterialRow(mat.name, base_color=(0.0, 0.0, 0.0)), reader.notes
+    kind = surface.bl_idname
+    if kind == "ShaderNodeBsdfPrincipled":
+        row = _principled(surface, reader)
+    elif kind == "ShaderNodeBsdfDiffuse":
+        row = MaterialRow(mat.name, base_color=reader.color(surface.inputs.get("Color")))
+        if reader.scalar(surface.inputs.get("Roughness")) > 0.0:
+            reader.note("Diffuse BSDF roughness (Oren-Nayar) ignored, rendered as Lambert")
+    elif kind == "ShaderNodeEmission":
+        color = np.array(reader.color(surface.inputs.get("Color"), (1.0, 1.0, 1.0)))
+        strength = reader.scalar(surface.inputs.get("Strength"), 1.0)
+        row = MaterialRow(mat.name, base_color=(0.0, 0.0, 0.0), specular=0.0,
+                          emission=tuple(color * strength))
+    else:
+        reader.note(f"unsupported shader '{surface.name}' ({kind}), rendered as grey diffuse")
+        row = MaterialRow(mat.name)
+    row.name = mat.name
+    return row, reader.notes
+
+
+def _principled(node, reader: _Reader) -> MaterialRow:
+    get = lambda concept: compat.principled_input(node, concept)  # noqa: E731
+    base = reader.color(get("base_color"))
+    roughness = reader.scalar(get("roughness"), 0.5)
+    metallic = reader.scalar(get("metallic"), 0.0)
+    specular = compat.principled_specular(reader.scalar(get("specular"), 0.5),
+                                          reader.scalar(get("ior"), 1.5))
+    e_color = np.array(reader.color(get("emission_color"), (0.0, 0.0, 0.0)))
+    e_strength = reader.scalar(get("emission_strength"), 1.0)
+    for concept, label in (("transmission", "transmission"), ("coat", "coat"),
+                           ("sheen", "sheen"), ("subsurface", "subsurface")):
+        if reader.scalar(get(concept), 0.0) > 0.0:
+            reader.note(f"Principled {label} ignored")
+    if reader.scalar(get("alpha"), 1.0) < 1.0:
+        reader.note("Principled alpha ignored (rendered opaque)")
+    normal = get("normal")
+    if normal is not None and normal.is_linked:
+        reader.note("normal/bump input ignored")
+    return MaterialRow(
+        name=reader.name,
+        base_color=tuple(np.clip(base, 0.0, 1.0)),
+        roughness=float(np.clip(roughness, 0.0, 1.0)),
+        metallic=float(np.clip(metallic, 0.0, 1.0)),
+        specular=max(specular, 0.0),
+        emission=tuple(np.maximum(e_color * e_strength, 0.0)),
+    )
+
+
+class MaterialCollector:
+    """Builds the scene's material table: one row per distinct Blender material."""
+
+    def __init__(self, override=None):
+        self.override = override
+        self.rows: list[MaterialRow] = []
+        self.warnings: list[str] = []
+        self._index: dict[str, int] = {}
+
+    def index_of(self, mat) -> int:
+        """Row of ``mat`` (None → the default surface), exporting it on first use."""
+        if self.override is not None:
+            mat = self.override
+        key = DEFAULT_MATERIAL_NAME if mat is None else "MA" + mat.original.name_full
+        row = self._index.get(key)
+        if row is not None:
+            return row
+        if mat is None:
+            material = MaterialRow(DEFAULT_MATERIAL_NAME)
+        else:
+            material, notes = read_material(mat)
+            if notes:
+                self.warnings.append(f"Material '{mat.name}': " + "; ".join(notes))
+        self._index[key] = len(self.rows)
+        self.rows.append(material)
+        return self._index[key]
+
+    def slot_table(self, obj) -> np.ndarray:
+        """int32 array mapping each material slot of ``obj`` to a row (at least one entry)."""
+        slots = [self.index_of(slot.material) for slot in obj.material_slots]
+        if not slots:
+            slots = [self.index_of(None)]
+        return np.asarray(slots, np.int32)
+
+    def table(self):
+        from ercuts_core.description import MaterialTable
+
+        rows = self.rows or [MaterialRow(DEFAULT_MATERIAL_NAME)]
+        return MaterialTable(
+            names=tuple(r.name for r in rows),
+            base_color=np.array([r.base_color for r in rows], np.float32).reshape(-1, 3),
+            roughness=np.array([r.roughness for r in rows], np.float32),
+            metallic=np.array([r.metallic for r in rows], np.float32),
+            specular=np.array([r.specular for r in rows], np.float32),
+            emission=np.array([r.emission for r in rows], np.float32).reshape(-1, 3),
+        )

@@ -20,6 +20,10 @@ bl_info = {
     "category": "Render",
 }
 
+from . import compat  # noqa: E402
+
+compat.preload_embreex()  # before anything imports the core (see compat.preload_embreex)
+
 from . import engine, properties, ui  # noqa: E402
 
 _modules = (properties, engine, ui)

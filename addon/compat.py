@@ -12,6 +12,8 @@ dependency when asked to render).
 from __future__ import annotations
 
 import math
+import os
+import sys
 
 import bpy
 
@@ -169,3 +171,48 @@ def area_light_radiance_scale(light, area: float) -> float:
 def world_override(view_layer):
     """``view_layer.world_override`` (5.0) or None (3.x has none)."""
     return getattr(view_layer, "world_override", None)
+
+
+# --------------------------------------------------------------------------- embreex
+
+def _process_exports_embree() -> bool:
+    """True when this Blender exports Embree's C API globally (e.g. Debian's 3.4.1 links
+    the system ``libembree3.so.3``)."""
+    import ctypes
+
+    try:
+        return hasattr(ctypes.CDLL(None), "rtcNewDevice")
+    except OSError:
+        return False
+
+
+def preload_embreex() -> None:
+    """Import embreex so that it talks to *its own* Embree 4.
+
+    Embree 3 and 4 share C symbol names (``rtcNewDevice``, ``rtcIntersect1``, …). In a
+    Blender that links Embree 3 globally, embreex's calls would bind to Embree 3 and
+    crash on the first ray query. Loading embreex's extension modules with
+    ``RTLD_DEEPBIND`` makes them resolve against their bundled Embree 4 first. numpy is
+    imported *before* switching the flag: numpy's bundled libgfortran must keep using
+    Blender's allocator (jemalloc), otherwise it frees foreign memory at exit.
+    No-op when embreex is already imported, when the process has no Embree symbols
+    (bpy module, most official builds), or when numpy/embreex are missing.
+    """
+    if "embreex.rtcore_scene" in sys.modules or not hasattr(os, "RTLD_DEEPBIND"):
+        return
+    if not _process_exports_embree():
+        return
+    try:
+        import numpy  # noqa: F401  (must not be loaded with RTLD_DEEPBIND)
+    except ImportError:
+        return
+    flags = sys.getdlopenflags()
+    sys.setdlopenflags(flags | os.RTLD_DEEPBIND)
+    try:
+        import embreex.mesh_construction  # noqa: F401
+        import embreex.rtcore  # noqa: F401
+        import embreex.rtcore_scene  # noqa: F401
+    except ImportError:
+        pass
+    finally:
+        sys.setdlopenflags(flags)

@@ -70,6 +70,9 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
 
     # ------------------------------------------------------------------ the render
     def _render(self, depsgraph):
+        from . import compat
+
+        compat.preload_embreex()
         import ercuts_core
 
         from . import framebuffer
@@ -91,7 +94,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
                 depsgraph, camera_override=self.camera_override,
                 size=(self.resolution_x, self.resolution_y),
                 use_border=False if self.is_preview else None,
-                should_stop=self.test_break)
+                should_stop=self._should_stop)
         except ExportCancelled:
             return
         desc = exported.description
@@ -131,7 +134,11 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         self.update_progress(min(max(float(fraction), 0.0), 1.0))
         elapsed = time.monotonic() - self._start
         self.update_stats("Ercuts", f"{self._stats_prefix}{message} | {_format_time(elapsed)}")
-        return not self.test_break()
+        return not self._should_stop()
+
+    def _should_stop(self) -> bool:
+        """True when the user cancelled (Esc); a Python-level hook, so tests can stand in."""
+        return bool(self.test_break())
 
 
 classes = (ErcutsRenderEngine,)

@@ -90,6 +90,11 @@ def render(desc: SceneDescription, settings: RenderSettings | None = None,
         if scene.lights.empty:
             film.passes_done = settings.samples
             _black_pass(film, scene, settings)
+        elif settings.integrator == "ERCUTS":
+            from .integrators.ercuts import ErcutsIntegrator
+            t0 = time.perf_counter()
+            ErcutsIntegrator(scene, settings).render(film, clock, timings, stats)
+            timings["render"] = time.perf_counter() - t0
         else:
             _integrate(scene, settings, film, clock, timings)
     finally:

@@ -9,7 +9,9 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, fields
 
-INTEGRATORS = ("BDPT", "PATH")
+INTEGRATORS = ("ERCUTS", "BDPT", "PATH")
+GATHERS = ("LIGHTCUTS", "BRUTE_FORCE")
+SEEDINGS = ("BDPT", "PATH")
 
 
 @dataclass(frozen=True)
@@ -17,9 +19,10 @@ class RenderSettings:
     """Core render settings.
 
     Attributes:
-        integrator: 'BDPT' (bidirectional path tracing with MIS) or 'PATH' (the
-            reference unidirectional path tracer with next-event estimation).
-        samples: samples per pixel.
+        integrator: 'ERCUTS' (the paper: BDPT → ER chains → VPLs → light tree →
+            lightcuts), 'BDPT' (bidirectional path tracing with MIS; also the "BDPT only"
+            ablation) or 'PATH' (the reference path tracer with next-event estimation).
+        samples: samples per pixel (for ERCUTS: of the rough BDPT image of step 1).
         seed: random seed; the same seed and settings give the same image.
         max_depth: maximum number of bounces (path segments − 1); 1 = direct light only.
         rr_depth: bounces before Russian roulette starts.
@@ -28,6 +31,19 @@ class RenderSettings:
         film_transparent: alpha = coverage instead of 1.
         batch_rays: target rays per wavefront batch (memory vs. per-call overhead).
         threads: embreex threads per batch (0 = all cores).
+        max_error: lightcut error threshold relative to the estimate (Weber's law, 2 %).
+        chains_per_pixel: average number of ER chains started per pixel (c).
+        chain_length: mutation steps per chain (N); every step deposits P/n.
+        lens_perturbation, caustic_perturbation, multichain_perturbation,
+        bidirectional_mutation: Veach's mutations used by the chains.
+        max_cut_size: largest lightcut per shading point.
+        clamp: VPL geometry clamp as a minimum distance, a fraction of the scene's bounding
+            diagonal (cosθ/d² ≤ 1/(clamp·diagonal)²); 0 = off. The removed energy is reported.
+        gather: 'LIGHTCUTS' (the light tree) or 'BRUTE_FORCE' (every VPL at every shading
+            point: the ablation that shows the tree's role).
+        seeding: 'BDPT' (paper: seed chains from bidirectional paths) or 'PATH'.
+        shading_samples: shading points (camera rays) per pixel for the VPL gather.
+        e1_samples: shading points per VPL for its intensity normalisation (P*).
     """
 
     integrator: str = "BDPT"
@@ -39,6 +55,19 @@ class RenderSettings:
     film_transparent: bool = False
     batch_rays: int = 1 << 17
     threads: int = 0
+    max_error: float = 0.02
+    chains_per_pixel: float = 0.25
+    chain_length: int = 100
+    lens_perturbation: bool = True
+    caustic_perturbation: bool = True
+    multichain_perturbation: bool = True
+    bidirectional_mutation: bool = True
+    max_cut_size: int = 1000
+    clamp: float = 0.01
+    gather: str = "LIGHTCUTS"
+    seeding: str = "BDPT"
+    shading_samples: int = 1
+    e1_samples: int = 64
 
     def __post_init__(self):
         if self.integrator not in INTEGRATORS:
@@ -51,6 +80,18 @@ class RenderSettings:
             raise ValueError(f"time_limit must be >= 0, got {self.time_limit}")
         if self.batch_rays < 1024:
             raise ValueError(f"batch_rays must be >= 1024, got {self.batch_rays}")
+        if self.gather not in GATHERS:
+            raise ValueError(f"unknown gather {self.gather!r}; expected one of {GATHERS}")
+        if self.seeding not in SEEDINGS:
+            raise ValueError(f"unknown seeding {self.seeding!r}; expected one of {SEEDINGS}")
+        if not 0 < self.max_error < 1:
+            raise ValueError(f"max_error must be in (0, 1), got {self.max_error}")
+        if self.chains_per_pixel <= 0 or self.chain_length < 1:
+            raise ValueError("chains_per_pixel must be > 0 and chain_length >= 1")
+        if self.max_cut_size < 1 or self.shading_samples < 1 or self.e1_samples < 1:
+            raise ValueError("max_cut_size, shading_samples and e1_samples must be >= 1")
+        if self.clamp < 0:
+            raise ValueError(f"clamp must be >= 0, got {self.clamp}")
 
     @classmethod
     def from_dict(cls, d: dict) -> "RenderSettings":

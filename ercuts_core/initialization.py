@@ -1,0 +1,149 @@
+"""Paper step 1 — initialization: a rough BDPT image, its energy P, and seed paths.
+
+P is the image energy (Σ over the window's pixels of the luminance) of the paths the VPLs
+stand for: paths with a surface point x2 (algorithm.md §G.1). It is the rough BDPT image's
+energy minus the energy of the other classes — light seen directly and direct light from
+point, spot, sun and environment lights — which the ERCUTS integrator renders itself.
+
+Seed paths come from fresh samples, one per pixel (paper §3.2: "at each pixel a fresh
+bidirectional path"): every connection strategy of a BDPT sample with a non-zero
+MIS-weighted contribution is a seed with energy e = Y(w·C) in pixel units (Mitsuba's
+``PathSampler::samplePaths``). :func:`seeds_from_path_tracer` is a unidirectional
+alternative (Cline et al. 2005 seeded ERPT with a path tracer) used when BDPT seeding is
+switched off and by tests.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .bsdf import Bsdf
+from .film import Film
+from .integrators.base import power_heuristic
+from .lights import AREA, ENV, POINT, SUN, TRI
+from .paths import PathBatch, is_target
+from .sampling import luminance
+from .scene import BuiltScene
+
+
+def rough_image_energy(image: NDArray) -> float:
+    """Σ over pixels of Y(rgb) of an (h, w, ≥3) image."""
+    return float(luminance(np.asarray(image, np.float64)[..., :3]).sum())
+
+
+def seeds_from_path_tracer(scene: BuiltScene, max_depth: int, rng: np.random.Generator,
+                           pix: NDArray | None = None) -> tuple[PathBatch, NDArray]:
+    """One path-traced sample per pixel; every NEE connection and BSDF-found emitter is a seed.
+
+    Returns:
+        (S paths, (S,) energies e = Y(w·C) in pixel units); target-class paths only.
+    """
+    cam, lights, tracer = scene.camera, scene.lights, scene.tracer
+    w = cam.window
+    pix = np.arange(w.n_pixels) if pix is None else pix
+    n, K = len(pix), max_depth + 2
+    raster = np.stack([w.x0 + pix % w.width, w.y0 + pix // w.width], axis=1) + rng.random((n, 2))
+    o, d = cam.generate_rays(raster)
+    base = PathBatch.empty(n, K)
+    base.raster[:] = raster
+    base.p[:, 0] = o
+    beta = np.ones((n, 3))
+    lanes = np.arange(n)
+    prev_pdf = np.zeros(n)
+    out_paths, out_e = [], []
+    for depth in range(1, max_depth + 2):
+        surf = scene.intersect(o, d)
+        hit = surf.valid
+        # BSDF-sampled rays that found an emitter (depth ≥ 2: x2 exists).
+        if depth >= 2:
+            _emitter_seeds(scene, base, lanes, surf, d, beta, prev_pdf, depth, out_paths, out_e)
+        keep = np.flatnonzero(hit)
+        if depth > max_depth or len(keep) == 0:
+            break
+        lanes, surf, d, beta = lanes[keep], surf.subset(keep), d[keep], beta[keep]
+        base.p[lanes, depth], base.ng[lanes, depth] = surf.p, surf.ng
+        base.ns[lanes, depth], base.mat[lanes, depth] = surf.ns, surf.mat
+        wo = -d
+        bsdf = Bsdf.from_table(scene.materials, surf.mat, surf.ns, surf.ng)
+        _nee_seeds(scene, base, lanes, surf, wo, bsdf, beta, depth, rng, out_paths, out_e)
+        bs = bsdf.sample(wo, rng.random((len(lanes), 3)))
+        beta = beta * bs.weight
+        alive = np.flatnonzero(bs.valid & (beta.max(axis=1) > 0))
+        lanes, surf, beta = lanes[alive], surf.subset(alive), beta[alive]
+        d, prev_pdf = bs.wi[alive], bs.pdf[alive]
+        o = tracer.offset(surf.p, surf.ng, d)
+    if not out_paths:
+        return PathBatch.empty(0, K), np.zeros(0)
+    paths, e = PathBatch.concat(out_paths), np.concatenate(out_e)
+    keep = is_target(scene, paths) & (e > 0)
+    return paths.take(keep), e[keep]
+
+
+def _nee_seeds(scene, base, lanes, surf, wo, bsdf, beta, depth, rng, out_paths, out_e):
+    lights = scene.lights
+    n = len(lanes)
+    ls = lights.illuminate(surf.p, rng.random(n), rng.random((n, 2)))
+    kind = lights.kind[ls.light]
+    f = bsdf.eval(wo, ls.wi) * np.abs(np.einsum("ij,ij->i", surf.ns, ls.wi))[:, None]
+    nee_only = (kind == POINT) | (kind == SUN) | (kind == AREA)
+    w = np.where(nee_only, 1.0, power_heuristic(ls.pdf_w, bsdf.pdf(wo, ls.wi)))
+    C = beta * f * ls.Li / np.where(ls.valid, ls.pdf_w, 1.0)[:, None] * w[:, None]
+    ok = ls.valid & (C.max(axis=1) > 0)
+    if not ok.any():
+        return
+    r = np.flatnonzero(ok)
+    paths = base.take(lanes[r])
+    paths.k[:] = depth + 1
+    paths.light[:] = ls.light[r]
+    infinite = (kind[r] == SUN) | (kind[r] == ENV)
+    paths.p[:, depth + 1] = np.where(infinite[:, None], ls.wi[r], ls.p[r])
+    surf_l = ((kind[r] == AREA) | (kind[r] == TRI))[:, None]
+    paths.ng[:, depth + 1] = np.where(surf_l, ls.n[r], 0.0)
+    paths.ns[:, depth + 1] = paths.ng[:, depth + 1]
+    vis = _visible_last(scene, paths)
+    out_paths.append(paths.take(vis))
+    out_e.append(luminance(C[r][vis]))
+
+
+def _emitter_seeds(scene, base, lanes, surf, d, beta, prev_pdf, depth, out_paths, out_e):
+    lights = scene.lights
+    hit = surf.valid
+    Le = np.zeros((len(lanes), 3))
+    light = np.full(len(lanes), -1)
+    pdf_l = np.zeros(len(lanes))
+    if len(lights.emissive_tris) and hit.any():
+        h = np.flatnonzero(hit)
+        lt = lights.tri_light[surf.prim[h]]
+        em = lt >= 0
+        h = h[em]
+        Le[h] = lights.tri_radiance(surf.prim[h])
+        light[h] = lt[em]
+        prev = base.p[lanes[h], depth - 1]
+        pdf_l[h] = lights.pdf_illuminate_tri(prev, surf.prim[h], surf.p[h], surf.ng[h])
+    if lights.env_light >= 0 and (~hit).any():
+        m = np.flatnonzero(~hit)
+        Le[m] = lights.env_L
+        light[m] = lights.env_light
+        pdf_l[m] = lights.pdf_illuminate_env(len(m))
+    ok = light >= 0
+    if not ok.any():
+        return
+    r = np.flatnonzero(ok)
+    w = power_heuristic(prev_pdf[r], pdf_l[r])
+    C = beta[r] * Le[r] * w[:, None]
+    paths = base.take(lanes[r])
+    paths.k[:] = depth
+    paths.light[:] = light[r]
+    env = ~hit[r]
+    paths.p[:, depth] = np.where(env[:, None], d[r], surf.p[r])
+    paths.ng[:, depth] = np.where(env[:, None], 0.0, surf.ng[r])
+    paths.ns[:, depth] = paths.ng[:, depth]
+    out_paths.append(paths)
+    out_e.append(luminance(C))
+
+
+def _visible_last(scene: BuiltScene, paths: PathBatch) -> NDArray:
+    from .paths import edge_visible
+    return edge_visible(scene, paths, paths.k - 1)
+
+

@@ -1,0 +1,228 @@
+"""Eye-first light paths as padded arrays, and their measurement contribution.
+
+A batch of C paths ``X = x0 x1 … x_k`` (x0 the camera, x_k on a light) is stored as padded
+(C, K, …) arrays with K = max_depth + 2 vertex slots. The chains of the ER step mutate these.
+
+State space and measure. A path is parameterised by the raster position ``u`` of x1
+(pixel units) and the vertices x2 … x_k: surface vertices in the area measure, a point
+light by counting, a sun by counting and an environment direction by solid angle. In this
+measure the camera factor W_e·G(x0,x1)/p(x1|u) is 1, so the contribution is the path
+tracer's integrand [Veach 1997 eq. 8.7 with the pixel filter absorbed]::
+
+    f(X) = Π_{i=1}^{k-1} f_r(x_i) · Π_{i=1}^{k-2} G(x_i, x_{i+1}) · T_k
+    G(x_i, x_j) = |n_s(x_i)·ω| · |n_g(x_j)·ω| / d²        (visibility tested separately)
+    T_k = |n_s(x_{k-1})·ω| · { |n_g·ω|/d² · L_e   area / emissive triangle
+                              1/d² · I(ω)          point / spot
+                              E                    sun
+                              L_env                environment }
+
+Only paths whose x2 is a surface point can become VPLs (paper §3.3); :func:`is_target`
+marks them, and the chains' target function is f·[is_target].
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .bsdf import Bsdf
+from .lights import AREA, ENV, POINT, SUN, TRI
+from .sampling import luminance
+from .scene import BuiltScene
+
+
+def _dot(a, b):
+    return np.einsum("ij,ij->i", a, b)
+
+
+@dataclass
+class PathBatch:
+    """C eye-first paths (see module docstring).
+
+    Attributes:
+        raster: (C, 2) full-frame raster position of x1.
+        p: (C, K, 3) vertex positions; slot k holds the light point (POINT: its position;
+            SUN/ENV: the unit direction from x_{k-1} toward the light).
+        ng: (C, K, 3) unit geometric normals (zero for x0 and point/infinite lights).
+        ns: (C, K, 3) unit shading normals.
+        mat: (C, K) material rows of surface vertices.
+        k: (C,) index of the light vertex (= number of edges).
+        light: (C,) global light index of x_k.
+    """
+
+    raster: NDArray
+    p: NDArray
+    ng: NDArray
+    ns: NDArray
+    mat: NDArray
+    k: NDArray
+    light: NDArray
+
+    @staticmethod
+    def empty(n: int, slots: int) -> "PathBatch":
+        return PathBatch(np.zeros((n, 2)), np.zeros((n, slots, 3)), np.zeros((n, slots, 3)),
+                         np.zeros((n, slots, 3)), np.zeros((n, slots), np.int64),
+                         np.zeros(n, np.int64), np.zeros(n, np.int64))
+
+    def __len__(self) -> int:
+        return len(self.k)
+
+    @property
+    def slots(self) -> int:
+        return self.p.shape[1]
+
+    def take(self, idx) -> "PathBatch":
+        return PathBatch(self.raster[idx], self.p[idx], self.ng[idx], self.ns[idx], self.mat[idx],
+                         self.k[idx], self.light[idx])
+
+    def put(self, idx, other: "PathBatch") -> None:
+        """Overwrite paths ``idx`` with ``other`` (in place)."""
+        self.raster[idx] = other.raster
+        self.p[idx] = other.p
+        self.ng[idx] = other.ng
+        self.ns[idx] = other.ns
+        self.mat[idx] = other.mat
+        self.k[idx] = other.k
+        self.light[idx] = other.light
+
+    def copy(self) -> "PathBatch":
+        return self.take(slice(None))
+
+    @staticmethod
+    def concat(parts: list["PathBatch"]) -> "PathBatch":
+        return PathBatch(*(np.concatenate([getattr(q, f) for q in parts]) for f in
+                           ("raster", "p", "ng", "ns", "mat", "k", "light")))
+
+    def vertex(self, i: NDArray | int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        """Position, ng, ns, mat of vertex ``i`` (scalar or (C,)) of every path."""
+        rows = np.arange(len(self))
+        i = np.broadcast_to(i, rows.shape)
+        return self.p[rows, i], self.ng[rows, i], self.ns[rows, i], self.mat[rows, i]
+
+
+def light_kind(scene: BuiltScene, paths: PathBatch) -> NDArray:
+    """(C,) kind of each path's light vertex."""
+    return scene.lights.kind[paths.light]
+
+
+def is_target(scene: BuiltScene, paths: PathBatch) -> NDArray:
+    """(C,) True where x2 exists and is a surface point (a VPL can sit there)."""
+    kind = light_kind(scene, paths)
+    surface_light = (kind == AREA) | (kind == TRI)
+    return (paths.k >= 3) | ((paths.k == 2) & surface_light)
+
+
+def direction_to_next(paths: PathBatch, i: NDArray) -> tuple[NDArray, NDArray]:
+    """Unit direction x_i → x_{i+1} and its length (inf toward infinite lights).
+
+    ``i`` is (C,); for i + 1 == k on SUN/ENV the stored direction is used.
+    """
+    rows = np.arange(len(paths))
+    a = paths.p[rows, i]
+    b = paths.p[rows, np.minimum(i + 1, paths.slots - 1)]
+    d = b - a
+    dist = np.linalg.norm(d, axis=1)
+    w = d / np.maximum(dist, 1e-300)[:, None]
+    return w, dist
+
+
+def contribution(scene: BuiltScene, paths: PathBatch, infinite_dir: NDArray | None = None,
+                 with_x2_light: bool = False) -> tuple[NDArray, NDArray] | NDArray:
+    """(C, 3) measurement contribution f(X) (module docstring), visibility not included.
+
+    Args:
+        with_x2_light: also return (C, 3) the light leaving x2 toward x1 in the same
+            units (f / (f_r(x1)·G(x1,x2))), the colour of the VPL at x2.
+    """
+    lights = scene.lights
+    C, K = len(paths), paths.slots
+    rows = np.arange(C)
+    kind = lights.kind[paths.light]
+    infinite = (kind == SUN) | (kind == ENV)
+    f = np.ones((C, 3))
+    head = np.ones((C, 3))            # f_r(x1)·G(x1,x2): divided out for the x2 light
+    for i in range(1, K - 1):
+        act = i < paths.k
+        if not act.any():
+            break
+        r = rows[act]
+        xi, ngi, nsi, mi = paths.p[r, i], paths.ng[r, i], paths.ns[r, i], paths.mat[r, i]
+        wo = paths.p[r, i - 1] - xi
+        wo /= np.maximum(np.linalg.norm(wo, axis=1), 1e-300)[:, None]
+        last_edge = (i + 1) == paths.k[r]
+        nxt = paths.p[r, i + 1]
+        inf_edge = last_edge & infinite[r]
+        d = np.where(inf_edge[:, None], nxt, nxt - xi)
+        dist = np.linalg.norm(d, axis=1)
+        wi = d / np.maximum(dist, 1e-300)[:, None]
+        bsdf = Bsdf.from_table(scene.materials, mi, nsi, ngi)
+        fr = bsdf.eval(wo, wi) * np.abs(_dot(nsi, wi))[:, None]
+        # Conversion at the next vertex: area (surfaces), 1/d² (point), 1 (infinite).
+        k_next = kind[r]
+        surf_next = ~last_edge | (k_next == AREA) | (k_next == TRI)
+        conv = np.where(surf_next, np.abs(_dot(paths.ng[r, i + 1], wi)) / np.maximum(dist, 1e-300) ** 2,
+                        np.where(inf_edge, 1.0, 1.0 / np.maximum(dist, 1e-300) ** 2))
+        term = fr * conv[:, None]
+        f[r] *= term
+        if i == 1:
+            head[r] = term
+        # Emission of the light vertex toward x_i.
+        if last_edge.any():
+            e = r[last_edge]
+            f[e] *= _emitted(scene, paths, e, -wi[last_edge])
+    f[paths.k < 2] = 0.0
+    if with_x2_light:
+        safe = np.where(head > 0, head, 1.0)
+        return f, np.where(head > 0, f / safe, 0.0)
+    return f
+
+
+def _emitted(scene: BuiltScene, paths: PathBatch, rows: NDArray, w_out: NDArray) -> NDArray:
+    """(n, 3) radiance (or intensity / irradiance) leaving the light vertex along ``w_out``."""
+    lights = scene.lights
+    light = paths.light[rows]
+    kind, loc = lights.kind[light], lights.local[light]
+    out = np.zeros((len(rows), 3))
+    m = kind == AREA
+    if m.any():
+        facing = _dot(lights.ar_n[loc[m]], w_out[m]) > 0
+        out[m] = lights.ar_L[loc[m]] * facing[:, None]
+    m = kind == TRI
+    if m.any():
+        out[m] = lights.tri_L[loc[m]]
+    m = kind == POINT
+    if m.any():
+        out[m] = lights.pt_I[loc[m]] * lights.spot_factor(loc[m], w_out[m])[:, None]
+    m = kind == SUN
+    if m.any():
+        out[m] = lights.sun_E[loc[m]]
+    m = kind == ENV
+    if m.any():
+        out[m] = lights.env_L
+    return out
+
+
+def edge_visible(scene: BuiltScene, paths: PathBatch, i: NDArray) -> NDArray:
+    """(C,) visibility of edge x_i → x_{i+1} (i ≥ 1) for every path."""
+    C = len(paths)
+    rows = np.arange(C)
+    kind = scene.lights.kind[paths.light]
+    a, nga = paths.p[rows, i], paths.ng[rows, i]
+    j = i + 1
+    b, ngb = paths.p[rows, j], paths.ng[rows, j]
+    last = j == paths.k
+    infinite = last & ((kind == SUN) | (kind == ENV))
+    b = np.where(infinite[:, None], a + b * 4.0 * scene.scene_radius, b)
+    point_end = last & ((kind == POINT) | infinite)
+    vis = np.ones(C, bool)
+    s = ~point_end
+    if s.any():
+        vis[s] = scene.tracer.visible(a[s], nga[s], b[s], ngb[s])
+    if point_end.any():
+        vis[point_end] = scene.tracer.visible(a[point_end], nga[point_end], b[point_end], None)
+    return vis
+
+
+def luminance_of(rgb: NDArray) -> NDArray:
+    return luminance(rgb)

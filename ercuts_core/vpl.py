@@ -1,0 +1,244 @@
+"""Paper step 3 — VPLs from the chains, and their intensity normalisation.
+
+Each VPL sits at a chain's x2 with the surface normal facing x1 and emits like a small
+diffuse patch: intensity I·max(0, n·ω) [Keller 1997]. The paper gives it raw intensity
+k (its number of chain states) and real intensity k·P/(n·P*) with P* its rendered image
+energy. Following algorithm.md §G.4 we measure P* at *unit* intensity, E1(v) = Σ_pixels
+Y(image of v alone with colour c_v), so that I_v = k_v·e_d/E1(v)·c_v (e_d = P/n): every
+chain state then carries exactly its share e_d of the image energy.
+
+E1 is estimated per VPL from M shading points drawn from a mixture of the whole window and
+a neighbourhood of the VPL's home pixel (where the VPL certainly shines), one-sample MIS
+over the mixture [Veach 1997 §9.2.2] — unbiased for E1 and never zero for a visible VPL.
+The shading uses the *same* BRDF, visibility and geometry clamp as the final gather, as
+the rule in algorithm.md §D.4 requires; 1/Ê1 has a small Jensen bias that shrinks with M.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .bsdf import Bsdf, bsdf_max_value
+from .camera import Window
+from .er_sampling import ChainResult
+from .sampling import luminance
+from .scene import BuiltScene, Surface
+
+
+@dataclass
+class GBuffer:
+    """First hits of camera rays: the shading points of the gather.
+
+    Attributes:
+        pixel: (Q,) window pixel index of each point (S points per pixel).
+        p, ng, ns, wo: (Q, 3) hit position, normals (ns flipped toward wo), direction to eye.
+        mat: (Q,) material row; valid: (Q,) the ray hit a surface.
+        surf: the raw :class:`Surface` (unflipped normals, for emission lookups).
+        samples: shading points per pixel (S).
+    """
+
+    pixel: NDArray
+    p: NDArray
+    ng: NDArray
+    ns: NDArray
+    wo: NDArray
+    mat: NDArray
+    valid: NDArray
+    surf: Surface
+    samples: int
+
+
+def build_gbuffer(scene: BuiltScene, samples: int, rng: np.random.Generator) -> tuple[GBuffer, NDArray]:
+    """Trace ``samples`` jittered camera rays per window pixel; returns the G-buffer and rays' d."""
+    w = scene.camera.window
+    pix = np.repeat(np.arange(w.n_pixels), samples)
+    raster = np.stack([w.x0 + pix % w.width, w.y0 + pix // w.width], axis=1).astype(np.float64)
+    raster += rng.random((len(pix), 2)) if samples > 1 else 0.5
+    o, d = scene.camera.generate_rays(raster)
+    surf = scene.intersect(o, d)
+    wo = -d
+    flip = np.einsum("ij,ij->i", surf.ng, wo) < 0
+    sign = np.where(flip, -1.0, 1.0)[:, None]
+    return GBuffer(pix, surf.p, surf.ng * sign, surf.ns * sign, wo, surf.mat, surf.valid, surf, samples), d
+
+
+def g_clamp(scene: BuiltScene, clamp: float) -> float:
+    """Geometry-term clamp: cosθ_v/d² ≤ 1/(clamp·diagonal)²; 0 disables (returns inf)."""
+    if clamp <= 0:
+        return np.inf
+    return 1.0 / (clamp * 2.0 * scene.scene_radius) ** 2
+
+
+def vpl_radiance(scene: BuiltScene, g: GBuffer, pts: NDArray, pos: NDArray, normal: NDArray,
+                 intensity: NDArray, gmax: float) -> tuple[NDArray, NDArray]:
+    """Radiance at shading points ``pts`` from VPLs (pos, normal, intensity), one pair per row.
+
+    Returns:
+        (n, 3) f·|cos_x|·min(cos_v/d², gmax)·V·I, and (n,) the luminance removed by the clamp.
+    """
+    x = g.p[pts]
+    d = pos - x
+    dist2 = np.einsum("ij,ij->i", d, d)
+    wi = d / np.sqrt(np.maximum(dist2, 1e-300))[:, None]
+    cos_v = np.maximum(-np.einsum("ij,ij->i", normal, wi), 0.0)
+    geo = cos_v / np.maximum(dist2, 1e-300)
+    geo_c = np.minimum(geo, gmax)
+    bsdf = Bsdf.from_table(scene.materials, g.mat[pts], g.ns[pts], g.ng[pts])
+    m = bsdf.eval(g.wo[pts], wi) * np.abs(np.einsum("ij,ij->i", g.ns[pts], wi))[:, None]
+    L = m * (geo_c[:, None] * intensity)
+    test = g.valid[pts] & (L.max(axis=1) > 0)
+    vis = np.zeros(len(pts), bool)
+    if test.any():
+        t = np.flatnonzero(test)
+        vis[t] = scene.tracer.visible(x[t], g.ng[pts[t]], pos[t], normal[t])
+    L = L * vis[:, None]
+    lost = luminance(m * ((geo - geo_c)[:, None] * intensity)) * vis
+    return L, lost
+
+
+@dataclass
+class VPLSet:
+    """Normalised VPLs ready for the light tree.
+
+    Attributes:
+        position, normal: (V, 3); intensity: (V, 3) RGB [W/sr at normal incidence].
+        count: (V,) deposits; e1: (V,) estimated image energy at unit intensity.
+        fallback: (h·w, 3) image of the states whose VPL lit no sampled pixel (splatted
+            ERPT-style at their home pixel so that no energy is lost).
+    """
+
+    position: NDArray
+    normal: NDArray
+    intensity: NDArray
+    count: NDArray
+    e1: NDArray
+    fallback: NDArray
+
+    def __len__(self) -> int:
+        return len(self.count)
+
+
+def estimate_e1(scene: BuiltScene, g: GBuffer, window: Window, pos: NDArray, normal: NDArray,
+                color: NDArray, home: NDArray, gmax: float, n_samples: int, rng: np.random.Generator,
+                radius: int = 8, chunk: int = 1 << 18) -> NDArray:
+    """(V,) Ê1: Σ over window pixels of Y(pixel value of a unit VPL), mixture-sampled."""
+    V = len(pos)
+    npix = window.n_pixels
+    S = g.samples
+    hx = np.clip(np.floor(home[:, 0]).astype(np.int64) - window.x0, 0, window.width - 1)
+    hy = np.clip(np.floor(home[:, 1]).astype(np.int64) - window.y0, 0, window.height - 1)
+    x0, x1 = np.maximum(hx - radius, 0), np.minimum(hx + radius, window.width - 1)
+    y0, y1 = np.maximum(hy - radius, 0), np.minimum(hy + radius, window.height - 1)
+    nb_size = (x1 - x0 + 1) * (y1 - y0 + 1)
+    total = np.zeros(V)
+    per = max(1, chunk // n_samples)
+    for s in range(0, V, per):
+        v = np.arange(s, min(V, s + per))
+        vv = np.repeat(v, n_samples)
+        n = len(vv)
+        local = rng.random(n) < 0.5
+        px = np.where(local, x0[vv] + (rng.random(n) * (x1 - x0 + 1)[vv]).astype(np.int64),
+                      rng.integers(0, window.width, n))
+        py = np.where(local, y0[vv] + (rng.random(n) * (y1 - y0 + 1)[vv]).astype(np.int64),
+                      rng.integers(0, window.height, n))
+        px = np.minimum(px, window.width - 1)
+        py = np.minimum(py, window.height - 1)
+        pix = py * window.width + px
+        in_nb = (px >= x0[vv]) & (px <= x1[vv]) & (py >= y0[vv]) & (py <= y1[vv])
+        q = 0.5 / npix + 0.5 * in_nb / nb_size[vv]
+        pts = pix * S + rng.integers(0, S, n)         # one of the pixel's shading points
+        L, _ = vpl_radiance(scene, g, pts, pos[vv], normal[vv], color[vv], gmax)
+        total[v] = np.bincount(vv - s, weights=luminance(L) / q, minlength=len(v)) / n_samples
+    return total
+
+
+def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, color: NDArray,
+                              gmax: float, n_samples: int, rng: np.random.Generator,
+                              chunk: int = 1 << 18) -> NDArray:
+    """(V,) Ê1 by tracing the VPL's own cosine emission one bounce to the camera.
+
+    E1 = ∫_Ω f_r(y)·cosθ_v·|n_g(y)·ω_cam|·F(y)·V dω with F = 1/(A_pix·cos³θ·d_cam²) the
+    camera connection factor (Camera.connect); with cosine sampling (pdf cosθ_v/π) a sample
+    is π·f_r(y)·(|n_s·ω_in|/|n_g·ω_in|)·|n_g·ω_cam|·F(y)·V_cam, times min(1, g_max·d²/cosθ_v)
+    for the geometry clamp. Bounded for diffuse receivers away from the lens, unlike
+    sampling pixels, whose samples near the VPL carry the 1/d² peak.
+    """
+    from .sampling import coordinate_system, sample_cosine_hemisphere, to_world
+    cam = scene.camera
+    V = len(pos)
+    total = np.zeros(V)
+    per = max(1, chunk // n_samples)
+    for s in range(0, V, per):
+        v = np.arange(s, min(V, s + per))
+        vv = np.repeat(v, n_samples)
+        n = len(vv)
+        local = sample_cosine_hemisphere(rng.random((n, 2)))
+        t, b = coordinate_system(normal[vv])
+        w = to_world(local, t, b, normal[vv])
+        o = scene.tracer.offset(pos[vv], normal[vv], w)
+        surf = scene.intersect(o, w)
+        val = np.zeros(n)
+        h = np.flatnonzero(surf.valid)
+        if len(h):
+            y = surf.subset(h)
+            con = cam.connect(y.p)
+            ok = con.valid
+            if ok.any():
+                k = np.flatnonzero(ok)
+                yk = y.subset(k)
+                wcam = con.wi[k]
+                flip = np.einsum("ij,ij->i", yk.ng, wcam) < 0
+                sg = np.where(flip, -1.0, 1.0)[:, None]
+                ng, ns = yk.ng * sg, yk.ns * sg
+                win = -w[h[k]]
+                bsdf = Bsdf.from_table(scene.materials, yk.mat, ns, ng)
+                fr = luminance(bsdf.eval(wcam, win) * color[vv[h[k]]])
+                cos_g_in = np.abs(np.einsum("ij,ij->i", ng, win))
+                ratio = np.abs(np.einsum("ij,ij->i", ns, win)) / np.maximum(cos_g_in, 1e-12)
+                cos_cam = np.abs(np.einsum("ij,ij->i", ng, wcam))
+                d2 = yk.t**2
+                cos_v = local[h[k], 2]
+                clamp = np.minimum(1.0, gmax * d2 / np.maximum(cos_v, 1e-300))
+                contrib = np.pi * fr * ratio * cos_cam * con.factor[k] * clamp
+                good = np.flatnonzero(contrib > 0)
+                if len(good):
+                    cam_pos = np.broadcast_to(cam.position, (len(good), 3)).copy()
+                    vis = scene.tracer.visible(yk.p[good], ng[good], cam_pos, None)
+                    val[h[k[good]]] = contrib[good] * vis
+        total[v] = np.bincount(vv - s, weights=val, minlength=len(v)) / n_samples
+    return total
+
+
+def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gmax: float,
+              n_samples: int, rng: np.random.Generator) -> VPLSet:
+    """Normalise the chains' VPLs: I_v = k_v·e_d / Ê1(v) · c_v (module docstring)."""
+    window = scene.camera.window
+    used = chains.count > 0
+    pos, normal = chains.position[used], chains.normal[used]
+    count, home = chains.count[used], chains.home[used]
+    color = chains.color_sum[used] / count[:, None]
+    y = luminance(color)
+    color = np.where(y[:, None] > 0, color / np.where(y > 0, y, 1.0)[:, None], 0.0)
+    e1 = estimate_e1_light_tracing(scene, pos, normal, color, gmax, n_samples, rng)
+    miss = e1 <= 0
+    if miss.any():   # the emission found no camera-visible point: sample pixels instead
+        e1[miss] = estimate_e1(scene, g, window, pos[miss], normal[miss], color[miss], home[miss],
+                               gmax, n_samples, rng)
+    lit = e1 > 0
+    intensity = np.where(lit[:, None], (count * e_d / np.where(lit, e1, 1.0))[:, None] * color, 0.0)
+    fallback = np.zeros((window.n_pixels, 3))
+    if (~lit).any():
+        hx = np.clip(np.floor(home[~lit, 0]).astype(np.int64) - window.x0, 0, window.width - 1)
+        hy = np.clip(np.floor(home[~lit, 1]).astype(np.int64) - window.y0, 0, window.height - 1)
+        val = (count[~lit] * e_d)[:, None] * color[~lit]
+        pix = hy * window.width + hx
+        for c in range(3):
+            fallback[:, c] = np.bincount(pix, weights=val[:, c], minlength=window.n_pixels)
+    return VPLSet(pos[lit], normal[lit], intensity[lit], count[lit], e1[lit], fallback)
+
+
+def material_bound(scene: BuiltScene, g: GBuffer) -> NDArray:
+    """(Q, 3) upper bound of the BSDF at each shading point (Lightcuts' material bound)."""
+    return bsdf_max_value(scene.materials, g.mat)

@@ -1,0 +1,344 @@
+"""The one material model: Lambertian base + GGX microfacet reflection, two-sided, no deltas.
+
+Per lane (all directions world space, unit, pointing away from the surface; cosines are
+taken with the shading normal n after the two-sided flip described below):
+
+* alpha = max(roughness², 1e-3) (Principled/Disney remapping; the floor keeps roughness 0
+  "rough but sharp": no delta lobe, finite values).
+* Fresnel [Schlick 1994]  F(c) = F0 + (F90 − F0)(1 − c)⁵  with c = wi·h and
+  F0 = lerp(F0_d, base, metallic),  F90 = lerp(F0_d, 1, metallic),  F0_d = 0.08·specular
+  (Principled "Specular IOR Level": 0.5 ↔ F0 = 0.04). The *dielectric* part is the
+  constant F0_d (F90 = F0 there); the *metallic* part is the full Schlick curve from the
+  base colour to white. Why: with the constant diffuse weight below, a dielectric Fresnel
+  that rises to 1 at grazing angles would reflect more than the incident energy (directional
+  albedo ≈ 0.96 + 0.8 at cosθ = 0.05), and it would also make the "specular = 0" lobe
+  non-zero; with F90 = F0_d the lobe is exactly zero when specular = metallic = 0.
+* f_diffuse = kd/π,  kd = (1 − metallic)(1 − F0_d)·base  (constant weight: reciprocal and
+  energy-bounded, kd + F ≤ 1 for base ≤ 1).
+* f_spec = D(h)·G2(wo, wi)·F(wi·h) / (4 |n·wo| |n·wi|),  h = (wo + wi)/|wo + wi|, with the
+  GGX/Trowbridge-Reitz NDF  D = α² / (π ((n·h)²(α² − 1) + 1)²)  [Walter et al. 2007, eq. 33]
+  and the *height-correlated* Smith masking-shadowing
+  G2 = 1/(1 + Λ(wo) + Λ(wi)),  Λ(w) = (√(1 + α² tan²θ) − 1)/2  [Heitz 2014, eqs. 72, 99].
+  G2 and F(wi·h) = F(wo·h) are symmetric, so f(wo, wi) = f(wi, wo) exactly.
+
+Sampling (one-sample MIS over the two lobes): lobe "specular" with probability
+p_spec = s/(s + d), s = lerp(F0_d, 1, metallic), d = (1 − metallic)(1 − F0_d)·Y(base)
+(Y = luminance); p_spec = 0 exactly when the specular lobe is zero, 1 when metallic = 1.
+The specular lobe samples the GGX distribution of *visible* normals [Heitz 2018, JCGT 7(4)]
+with the spherical-cap construction [Dupuy & Benyoub 2023] and reflects wo about it:
+pdf_spec(wi) = G1(wo)·D(h)/(4 n·wo) [Heitz 2018, eqs. 3 and 17]; the diffuse lobe samples
+cos/π. ``pdf()`` returns the mixture p_spec·pdf_spec + (1 − p_spec)·cos/π restricted to the
+valid set, i.e. the true density of the valid outputs of ``sample()``.
+
+Two-sidedness and validity: per call, a lane whose wo is below the geometric normal ng has
+ns and ng flipped. f = 0 and pdf = 0 unless wo and wi are both strictly above the flipped
+ng *and* above the flipped ns (cosines below ``COS_EPS`` count as "on the horizon").
+Reflection only; no delta lobes.
+
+Numerics: float64; every division is guarded; underflow is flushed silently, so results are
+finite under ``np.errstate(all="raise")`` for grazing (n·wo = 0), wi = ±wo, roughness 0.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .description import MaterialTable
+from .sampling import (INV_PI, coordinate_system, luminance, sample_cosine_hemisphere,
+                       to_local, to_world)
+
+F64 = NDArray[np.float64]
+B = NDArray[np.bool_]
+
+#: Smallest GGX alpha (roughness 0 → alpha 1e-3: a sharp but finite lobe).
+ALPHA_MIN = 1e-3
+#: Cosines at or below this count as grazing: f = 0 and pdf = 0 (avoids 1/cos blow-ups).
+COS_EPS = 1e-10
+
+
+# ---------------------------------------------------------------------------------------
+# Vector helpers
+# ---------------------------------------------------------------------------------------
+
+def _dot(a: F64, b: F64) -> F64:
+    """Row-wise dot product of (N, 3) arrays → (N,)."""
+    return np.einsum("ij,ij->i", a, b)
+
+
+def _div(num: F64, den: F64) -> F64:
+    """num/den where den > 0, else 0 (no floating-point warnings)."""
+    num, den = np.broadcast_arrays(np.asarray(num, np.float64), np.asarray(den, np.float64))
+    out = np.zeros(num.shape, np.float64)
+    np.divide(num, den, out=out, where=den > 0.0)
+    return out
+
+
+def _normalize(v: F64) -> F64:
+    """Unit rows of (N, 3) ``v``; zero rows stay zero."""
+    length = np.sqrt(_dot(v, v))
+    return _div(v, length[:, None])
+
+
+def _as3(v: ArrayLike) -> F64:
+    return np.asarray(v, dtype=np.float64).reshape(-1, 3)
+
+
+# ---------------------------------------------------------------------------------------
+# Microfacet terms (all on (N,) arrays of cosines with the shading normal)
+# ---------------------------------------------------------------------------------------
+
+def ggx_d(cos_h: F64, alpha: F64) -> F64:
+    """GGX normal distribution D(h) [sr⁻¹] [Walter et al. 2007, eq. 33].
+
+    Written as α²/(π (sin²θ_h + α² cos²θ_h)²); the bracket is >= min(α², 1) > 0.
+    """
+    a2 = alpha * alpha
+    c2 = np.clip(cos_h, 0.0, 1.0) ** 2
+    den = (1.0 - c2) + a2 * c2
+    return np.where(cos_h > 0.0, _div(a2 * INV_PI, den * den), 0.0)
+
+
+def smith_lambda(cos_t: F64, alpha: F64) -> F64:
+    """Smith Λ for GGX [Heitz 2014, eq. 72], stable form α²tan²θ / (2(1 + √(1 + α²tan²θ))).
+
+    Returns 0 where cos_t <= COS_EPS (those lanes are invalid anyway).
+    """
+    c2 = np.where(cos_t > COS_EPS, cos_t * cos_t, 1.0)
+    x = alpha * alpha * np.maximum(1.0 - c2, 0.0) / c2
+    return x / (2.0 * (1.0 + np.sqrt(1.0 + x)))
+
+
+def schlick_fresnel(cos_d: F64, f0: F64, f90: F64) -> F64:
+    """Schlick's approximation F0 + (F90 − F0)(1 − c)⁵ [Schlick 1994]. cos_d (N,), f0/f90 (N, 3)."""
+    m = (1.0 - np.clip(cos_d, 0.0, 1.0)) ** 5
+    return f0 + (f90 - f0) * m[:, None]
+
+
+def sample_ggx_vndf(wo_local: F64, alpha: F64, u: F64) -> F64:
+    """Sample a GGX microfacet normal from the distribution of visible normals.
+
+    Spherical-cap method [Dupuy & Benyoub 2023, Listing 3] for [Heitz 2018]: stretch wo to
+    the α = 1 configuration, sample the cap of the unit sphere above −wo_std, add wo_std,
+    and unstretch the resulting normal.
+
+    Args:
+        wo_local: (N, 3) unit outgoing directions in the shading frame with z > 0.
+        alpha: (N,) GGX alpha.
+        u: (N, 2) uniforms.
+    Returns:
+        (N, 3) unit microfacet normals m in the shading frame (m.z >= 0) with density
+        G1(wo)·max(0, wo·m)·D(m)/(n·wo).
+    """
+    a = alpha[:, None]
+    wo_std = _normalize(np.concatenate([wo_local[:, :2] * a, wo_local[:, 2:3]], axis=1))
+    phi = 2.0 * np.pi * u[:, 0]
+    z = (1.0 - u[:, 1]) * (1.0 + wo_std[:, 2]) - wo_std[:, 2]
+    sin_t = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
+    c = np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), z], axis=1)
+    h = c + wo_std
+    m = np.concatenate([h[:, :2] * a, np.maximum(h[:, 2:3], 0.0)], axis=1)
+    return _normalize(m)
+
+
+# ---------------------------------------------------------------------------------------
+# The BSDF
+# ---------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class BsdfSample:
+    """Result of :meth:`Bsdf.sample` (world space).
+
+    Attributes:
+        wi: (N, 3) sampled unit direction (away from the surface).
+        f: (N, 3) BSDF value f(wo, wi) [sr⁻¹] (0 where invalid).
+        pdf: (N,) solid-angle pdf of wi [sr⁻¹] (0 where invalid).
+        weight: (N, 3) f·|ns·wi|/pdf (0 where invalid).
+        valid: (N,) bool; False lanes must be terminated by the caller.
+    """
+
+    wi: F64
+    f: F64
+    pdf: F64
+    weight: F64
+    valid: B
+
+
+@dataclass(frozen=True, eq=False)
+class Bsdf:
+    """Per-lane material parameters at N shading points (structure of arrays).
+
+    Attributes:
+        ns: (N, 3) unit shading normals, flipped onto the side of ``ng`` at construction.
+        ng: (N, 3) unit geometric normals (either side; the side of wo decides per call).
+        kd: (N, 3) diffuse reflectance (1 − metallic)(1 − F0_d)·base; f_diffuse = kd/π.
+        f0: (N, 3) Schlick F0 = lerp(F0_d, base, metallic).
+        f90: (N, 3) Schlick F90 = lerp(F0_d, 1, metallic).
+        alpha: (N,) GGX alpha = max(roughness², 1e-3).
+        p_spec: (N,) probability of sampling the specular lobe.
+        is_diffuse: (N,) bool, True where the lane has no specular lobe.
+    """
+
+    ns: F64
+    ng: F64
+    kd: F64
+    f0: F64
+    f90: F64
+    alpha: F64
+    p_spec: F64
+    is_diffuse: B
+
+    # -- construction ---------------------------------------------------------------
+
+    @classmethod
+    def from_params(cls, base_color: ArrayLike, roughness: ArrayLike, metallic: ArrayLike,
+                    specular: ArrayLike, ns: ArrayLike, ng: ArrayLike) -> Bsdf:
+        """Build from per-lane Principled parameters.
+
+        Args:
+            base_color: (N, 3) (or broadcastable) linear RGB, clipped to [0, 1] (energy bound).
+            All parameters broadcast to the N lanes of the normals.
+            roughness, metallic: (N,) clipped to [0, 1].
+            specular: (N,) "Specular IOR Level" >= 0 (F0_d = 0.08·specular, clipped to 1).
+            ns, ng: (N, 3) shading / geometric normals (renormalized; zero rows give f = 0).
+        """
+        ng = _normalize(_as3(ng))
+        ns = _normalize(_as3(ns))
+        # Put the shading normal on the geometric normal's side (inverted custom normals)
+        ns = np.where((_dot(ns, ng) < 0.0)[:, None], -ns, ns)
+        n = ng.shape[0]
+        base = np.broadcast_to(np.clip(np.asarray(base_color, np.float64), 0.0, 1.0), (n, 3))
+        rough = np.broadcast_to(np.clip(np.asarray(roughness, np.float64), 0.0, 1.0), (n,))
+        metal = np.broadcast_to(np.clip(np.asarray(metallic, np.float64), 0.0, 1.0), (n,))
+        spec = np.broadcast_to(np.asarray(specular, np.float64), (n,))
+        f0_d = np.clip(0.08 * spec, 0.0, 1.0)
+        m = metal[:, None]
+        # Lobe weights (see module docstring)
+        kd = (1.0 - m) * (1.0 - f0_d)[:, None] * base
+        f0 = (1.0 - m) * f0_d[:, None] + m * base
+        f90 = (1.0 - m) * f0_d[:, None] + m
+        # Lobe-selection probability p_spec = s/(s + d)
+        s = (1.0 - metal) * f0_d + metal
+        d = (1.0 - metal) * (1.0 - f0_d) * luminance(base)
+        p_spec = np.clip(_div(s, s + d), 0.0, 1.0)
+        return cls(ns=ns, ng=ng, kd=kd, f0=f0, f90=f90,
+                   alpha=np.maximum(rough * rough, ALPHA_MIN), p_spec=p_spec,
+                   is_diffuse=s <= 0.0)
+
+    @classmethod
+    def from_table(cls, table: MaterialTable, mat_idx: ArrayLike, ns: ArrayLike,
+                   ng: ArrayLike) -> Bsdf:
+        """Gather per-lane parameters from ``table`` rows ``mat_idx`` (N,) int."""
+        idx = np.asarray(mat_idx, dtype=np.int64).reshape(-1)
+        return cls.from_params(table.base_color[idx].astype(np.float64),
+                               table.roughness[idx].astype(np.float64),
+                               table.metallic[idx].astype(np.float64),
+                               table.specular[idx].astype(np.float64), ns, ng)
+
+    def __len__(self) -> int:
+        return int(self.alpha.shape[0])
+
+    def subset(self, mask_or_idx: ArrayLike) -> Bsdf:
+        """The lanes selected by a (N,) bool mask or an integer index array."""
+        sel = np.asarray(mask_or_idx)
+        return Bsdf(ns=self.ns[sel], ng=self.ng[sel], kd=self.kd[sel], f0=self.f0[sel],
+                    f90=self.f90[sel], alpha=self.alpha[sel], p_spec=self.p_spec[sel],
+                    is_diffuse=self.is_diffuse[sel])
+
+    # -- evaluation -------------------------------------------------------------------
+
+    def _flipped_normals(self, wo: F64) -> tuple[F64, F64]:
+        """(ns, ng) flipped per lane onto the side of wo (two-sided surfaces)."""
+        flip = (_dot(wo, self.ng) < 0.0)[:, None]
+        return np.where(flip, -self.ns, self.ns), np.where(flip, -self.ng, self.ng)
+
+    def _eval_pdf(self, wo: F64, wi: F64) -> tuple[F64, F64, F64, B]:
+        """Shared core of eval/pdf/sample.
+
+        Returns:
+            f (N, 3) [sr⁻¹], pdf (N,) [sr⁻¹], cos_i = ns·wi (N,), valid (N,) bool.
+        """
+        ns, ng = self._flipped_normals(wo)
+        cos_o, cos_i = _dot(wo, ns), _dot(wi, ns)
+        valid = ((cos_o > COS_EPS) & (cos_i > COS_EPS)
+                 & (_dot(wo, ng) > COS_EPS) & (_dot(wi, ng) > COS_EPS))
+        # Half vector terms; wo + wi is computed the same way for (wo, wi) and (wi, wo)
+        h_len = np.sqrt(_dot(wo + wi, wo + wi))
+        cos_h = np.clip(_div(cos_o + cos_i, h_len), 0.0, 1.0)
+        cos_d = np.clip(0.5 * h_len, 0.0, 1.0)  # wi·h = |wo + wi|/2 for unit wo, wi
+        D = ggx_d(cos_h, self.alpha)
+        lam_o, lam_i = smith_lambda(cos_o, self.alpha), smith_lambda(cos_i, self.alpha)
+        G2 = 1.0 / (1.0 + (lam_o + lam_i))  # height-correlated [Heitz 2014, eq. 99]
+        F = schlick_fresnel(cos_d, self.f0, self.f90)
+        cc = np.where(valid, 4.0 * cos_o * cos_i, 0.0)
+        f_spec = F * _div(D * G2, cc)[:, None]
+        f = np.where(valid[:, None], self.kd * INV_PI + f_spec, 0.0)
+        # Mixture pdf of sample(): VNDF reflection pdf G1(wo) D / (4 cos_o) and cos/π
+        pdf_spec = _div(D / (1.0 + lam_o), np.where(valid, 4.0 * cos_o, 0.0))
+        pdf_diff = np.maximum(cos_i, 0.0) * INV_PI
+        pdf = np.where(valid, self.p_spec * pdf_spec + (1.0 - self.p_spec) * pdf_diff, 0.0)
+        return f, pdf, cos_i, valid
+
+    def eval(self, wo: ArrayLike, wi: ArrayLike) -> F64:
+        """BSDF value f_r(wo, wi) (no cosine factor), (N, 3) [sr⁻¹]."""
+        with np.errstate(under="ignore"):
+            return self._eval_pdf(_as3(wo), _as3(wi))[0]
+
+    def pdf(self, wo: ArrayLike, wi: ArrayLike) -> F64:
+        """Solid-angle pdf (N,) [sr⁻¹] with which :meth:`sample` (given wo) returns wi."""
+        with np.errstate(under="ignore"):
+            return self._eval_pdf(_as3(wo), _as3(wi))[1]
+
+    def sample(self, wo: ArrayLike, u: ArrayLike) -> BsdfSample:
+        """Importance-sample wi given wo.
+
+        Args:
+            wo: (N, 3) unit outgoing directions (away from the surface).
+            u: (N, 3) uniforms; u[:, 0] selects the lobe, u[:, 1:] the direction.
+        Returns:
+            :class:`BsdfSample`; lanes with wo or wi under the (flipped) horizon are invalid.
+        """
+        wo = _as3(wo)
+        u = np.asarray(u, dtype=np.float64).reshape(-1, 3)
+        with np.errstate(under="ignore"):
+            ns, _ = self._flipped_normals(wo)
+            t, b = coordinate_system(ns)
+            wo_l = to_local(wo, t, b, ns)
+            # Lanes with wo under the shading horizon are invalid; sample them about +z
+            wo_l = np.where((wo_l[:, 2] > COS_EPS)[:, None], wo_l, [0.0, 0.0, 1.0])
+            # Specular: reflect wo about a visible GGX normal; diffuse: cosine lobe
+            m = sample_ggx_vndf(wo_l, self.alpha, u[:, 1:3])
+            wi_spec = 2.0 * _dot(wo_l, m)[:, None] * m - wo_l
+            wi_diff = sample_cosine_hemisphere(u[:, 1:3])
+            choose_spec = u[:, 0] < self.p_spec
+            wi = _normalize(to_world(np.where(choose_spec[:, None], wi_spec, wi_diff), t, b, ns))
+            f, pdf, cos_i, valid = self._eval_pdf(wo, wi)
+            valid &= pdf > 0.0
+            weight = np.where(valid[:, None], f * _div(np.abs(cos_i), pdf)[:, None], 0.0)
+        return BsdfSample(wi=wi, f=f, pdf=np.where(valid, pdf, 0.0), weight=weight,
+                          valid=valid)
+
+    def albedo(self) -> F64:
+        """Cheap reflectance estimate kd + F0, (N, 3), for Russian roulette and AOV passes.
+
+        Not the directional albedo: ignores Fresnel growth at grazing and Smith losses.
+        """
+        return np.clip(self.kd + self.f0, 0.0, 1.0)
+
+
+def bsdf_max_value(table: MaterialTable, mat_idx: ArrayLike) -> F64:
+    """Practical upper bound of f over directions, (N, 3) [sr⁻¹], for the Lightcuts material bound.
+
+    Exact for the diffuse part (kd/π). For the specular part it is the value of the lobe
+    peak at normal incidence (wo = wi = n: D = 1/(πα²), G2 = 1) with the largest Fresnel
+    value max(F0, F90) = F90:  F90/(4π α²). The true supremum is unbounded at grazing angles
+    (f_spec ∝ 1/(n·wo n·wi)), so this is an approximation for glossy materials.
+    """
+    idx = np.asarray(mat_idx, dtype=np.int64).reshape(-1)
+    n = idx.shape[0]
+    up = np.tile([0.0, 0.0, 1.0], (n, 1))
+    bsdf = Bsdf.from_table(table, idx, up, up)
+    spec_peak = _div(np.ones(n), 4.0 * np.pi * bsdf.alpha ** 2)
+    spec = np.where(bsdf.is_diffuse[:, None], 0.0, np.maximum(bsdf.f0, bsdf.f90) * spec_peak[:, None])
+    return bsdf.kd * INV_PI + spec

@@ -194,11 +194,10 @@ class Bsdf:
     @classmethod
     def from_params(cls, base_color: ArrayLike, roughness: ArrayLike, metallic: ArrayLike,
                     specular: ArrayLike, ns: ArrayLike, ng: ArrayLike) -> Bsdf:
-        """Build from per-lane Principled parameters.
+        """Build from per-lane Principled parameters (broadcast to the N lanes of the normals).
 
         Args:
-            base_color: (N, 3) (or broadcastable) linear RGB, clipped to [0, 1] (energy bound).
-            All parameters broadcast to the N lanes of the normals.
+            base_color: (N, 3) linear RGB, clipped to [0, 1] (keeps the model energy-bounded).
             roughness, metallic: (N,) clipped to [0, 1].
             specular: (N,) "Specular IOR Level" >= 0 (F0_d = 0.08·specular, clipped to 1).
             ns, ng: (N, 3) shading / geometric normals (renormalized; zero rows give f = 0).

@@ -10,9 +10,21 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
 
+# Enum numbers are what .blend files store: keep them stable when items are added.
 INTEGRATOR_ITEMS = (
+    ("ERCUTS", "ERCuts", "Energy-redistribution chains seeded by BDPT, deposited as virtual point "
+     "lights and gathered with lightcuts (the paper's method)", 2),
     ("BDPT", "Bidirectional", "Bidirectional path tracing with multiple importance sampling", 0),
     ("PATH", "Path Tracing", "Unidirectional path tracing with next-event estimation (reference)", 1),
+)
+GATHER_ITEMS = (
+    ("LIGHTCUTS", "Lightcuts", "Gather the virtual point lights through the light tree (lightcuts)", 0),
+    ("BRUTE_FORCE", "Brute Force", "Gather every virtual point light at every shading point "
+     "(slow; shows what the light tree saves)", 1),
+)
+SEEDING_ITEMS = (
+    ("BDPT", "Bidirectional", "Seed the chains from bidirectional paths (the paper)", 0),
+    ("PATH", "Path Tracing", "Seed the chains from unidirectional paths", 1),
 )
 
 
@@ -79,11 +91,83 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         default=0, min=0, soft_max=256,
     )
 
+    max_error: FloatProperty(
+        name="Max Error",
+        description="Lightcut error threshold, relative to the pixel estimate (0.02 = Weber's law)",
+        default=0.02, min=0.0, max=1.0, precision=3,
+    )
+    chains_per_pixel: FloatProperty(
+        name="Chains per Pixel",
+        description="Average number of energy-redistribution chains started per pixel",
+        default=0.25, min=0.0, soft_max=16.0,
+    )
+    chain_length: IntProperty(
+        name="Chain Length",
+        description="Mutation steps per chain; every step deposits a share of the chain's energy",
+        default=100, min=1, soft_max=10000,
+    )
+    lens_perturbation: BoolProperty(
+        name="Lens Perturbation",
+        description="Use Veach's lens perturbation (moves the image point of a path)",
+        default=True,
+    )
+    caustic_perturbation: BoolProperty(
+        name="Caustic Perturbation",
+        description="Use Veach's caustic perturbation (moves the light end of a path)",
+        default=True,
+    )
+    multichain_perturbation: BoolProperty(
+        name="Multi-chain Perturbation",
+        description="Use Veach's multi-chain perturbation (several specular chains)",
+        default=True,
+    )
+    bidirectional_mutation: BoolProperty(
+        name="Bidirectional Mutation",
+        description="Use bidirectional mutations (replace a sub-path), for large changes",
+        default=True,
+    )
+    max_cut_size: IntProperty(
+        name="Max Cut Size",
+        description="Largest lightcut (number of light-tree nodes) evaluated per shading point",
+        default=1000, min=1, soft_max=100000,
+    )
+    clamp: FloatProperty(
+        name="VPL Clamp",
+        description=("Virtual point light clamp: minimum distance as a fraction of the scene's "
+                     "bounding diagonal (0 = off); the removed energy is reported"),
+        default=0.01, min=0.0, soft_max=0.5, precision=3,
+    )
+    gather: EnumProperty(
+        name="Gather",
+        description="How shading points collect light from the virtual point lights",
+        items=GATHER_ITEMS,
+        default="LIGHTCUTS",
+    )
+    seeding: EnumProperty(
+        name="Seeding",
+        description="Which paths start the energy-redistribution chains",
+        items=SEEDING_ITEMS,
+        default="BDPT",
+    )
+    shading_samples: IntProperty(
+        name="Shading Samples",
+        description="Shading points (camera rays) per pixel for the virtual point light gather",
+        default=1, min=1, soft_max=64,
+    )
+    e1_samples: IntProperty(
+        name="Normalisation Samples",
+        description="Shading points per virtual point light used to normalise its intensity",
+        default=64, min=1, soft_max=4096,
+    )
+
     def to_core(self, **overrides):
         """The equivalent ``ercuts_core.settings.RenderSettings`` (``overrides`` win)."""
         from ercuts_core.settings import RenderSettings
 
         values = {name: getattr(self, name) for name in PROPERTY_NAMES}
+        for name, value in values.items():
+            if isinstance(value, float):  # stored as float32: 0.01 reads back as 0.00999999977
+                values[name] = float(f"{value:.7g}")
         render = self.id_data.render
         if values["threads"] == 0 and render.threads_mode == "FIXED":
             values["threads"] = int(render.threads)
@@ -102,7 +186,10 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
 
 #: Names of the mirrored settings, in ``RenderSettings`` order.
 PROPERTY_NAMES = ("integrator", "samples", "seed", "max_depth", "rr_depth", "time_limit",
-                  "film_transparent", "batch_rays", "threads")
+                  "film_transparent", "batch_rays", "threads", "max_error", "chains_per_pixel",
+                  "chain_length", "lens_perturbation", "caustic_perturbation",
+                  "multichain_perturbation", "bidirectional_mutation", "max_cut_size", "clamp",
+                  "gather", "seeding", "shading_samples", "e1_samples")
 
 classes = (ErcutsRenderSettings,)
 

@@ -92,6 +92,53 @@ class ERCUTS_RENDER_PT_light_paths(ErcutsPanel, bpy.types.Panel):
         col.prop(settings, "rr_depth")
 
 
+class ERCUTS_RENDER_PT_chains(ErcutsPanel, bpy.types.Panel):
+    """Energy-redistribution chains (used by the ERCUTS integrator only)."""
+
+    bl_label = "Energy Redistribution"
+    bl_context = "render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        settings = context.scene.ercuts
+        layout.active = settings.integrator == "ERCUTS"
+        layout.prop(settings, "seeding")
+        col = layout.column(align=True)
+        col.prop(settings, "chains_per_pixel")
+        col.prop(settings, "chain_length")
+        col = layout.column(heading="Mutations", align=True)
+        col.prop(settings, "lens_perturbation", text="Lens")
+        col.prop(settings, "caustic_perturbation", text="Caustic")
+        col.prop(settings, "multichain_perturbation", text="Multi-chain")
+        col.prop(settings, "bidirectional_mutation", text="Bidirectional")
+
+
+class ERCUTS_RENDER_PT_lightcuts(ErcutsPanel, bpy.types.Panel):
+    """Virtual point lights and their lightcut gather (ERCUTS integrator only)."""
+
+    bl_label = "Lightcuts"
+    bl_context = "render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        settings = context.scene.ercuts
+        layout.active = settings.integrator == "ERCUTS"
+        layout.prop(settings, "gather")
+        col = layout.column(align=True)
+        col.prop(settings, "max_error")
+        col.prop(settings, "max_cut_size")
+        col.prop(settings, "clamp")
+        col = layout.column(align=True)
+        col.prop(settings, "shading_samples")
+        col.prop(settings, "e1_samples")
+
+
 class ERCUTS_RENDER_PT_film(ErcutsPanel, bpy.types.Panel):
     bl_label = "Film"
     bl_context = "render"
@@ -221,6 +268,8 @@ class ERCUTS_LIGHT_PT_light(ErcutsPanel, bpy.types.Panel):
 classes = (
     ERCUTS_RENDER_PT_sampling,
     ERCUTS_RENDER_PT_light_paths,
+    ERCUTS_RENDER_PT_chains,
+    ERCUTS_RENDER_PT_lightcuts,
     ERCUTS_RENDER_PT_film,
     ERCUTS_RENDER_PT_performance,
     ERCUTS_MATERIAL_PT_surface,

@@ -141,7 +141,8 @@ def black_world():
 
 
 def render_settings(width, height, max_depth=8):
-    """Resolution, engine (ERCUTS when registered), scene.ercuts defaults, matching Cycles."""
+    """Resolution, engine (ERCUTS when registered; scene.ercuts at its defaults), and Cycles
+    set up to match (``max_depth`` = the add-on's default max_depth)."""
     s = bpy.context.scene
     s.render.resolution_x, s.render.resolution_y = width, height
     s.render.resolution_percentage = 100
@@ -165,14 +166,9 @@ def render_settings(width, height, max_depth=8):
     except Exception as exc:  # noqa: BLE001
         print(f"build_scenes: Ercuts add-on not registered ({exc}); engine stays CYCLES")
     if hasattr(s, "ercuts"):
+        # scene.ercuts stays at the add-on's defaults (not stored, so they follow the add-on).
         s.render.engine = "ERCUTS"
-        from addon.properties import PROPERTY_NAMES
-
-        rna = s.ercuts.bl_rna.properties
-        for name in PROPERTY_NAMES:  # store the defaults explicitly in the file
-            if name != "film_transparent":
-                setattr(s.ercuts, name, rna[name].default)
-        s.ercuts.max_depth = max_depth
+        assert s.ercuts.max_depth == max_depth
     else:
         s.render.engine = "CYCLES"
 

@@ -47,7 +47,8 @@ def test_bl_info_and_engine_flags():
 
 
 def test_properties_mirror_render_settings():
-    from ercuts_core.settings import INTEGRATORS, RenderSettings
+    from ercuts_core import settings as core_settings
+    from ercuts_core.settings import RenderSettings
 
     rna = properties.ErcutsRenderSettings.bl_rna.properties
     names = [f.name for f in dataclasses.fields(RenderSettings)]
@@ -63,7 +64,11 @@ def test_properties_mirror_render_settings():
             assert prop.default == pytest.approx(expected), name
         else:
             assert prop.default == expected, name
-    assert tuple(item.identifier for item in rna["integrator"].enum_items) == INTEGRATORS
+    enums = {"integrator": "INTEGRATORS", "gather": "GATHERS", "seeding": "SEEDINGS"}
+    for name, table in enums.items():
+        if name in names:
+            items = tuple(item.identifier for item in rna[name].enum_items)
+            assert set(items) == set(getattr(core_settings, table)), name
     assert bpy.context.scene.ercuts.to_core() == RenderSettings()
 
 

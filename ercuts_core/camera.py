@@ -131,7 +131,7 @@ class Camera:
         """
         if self.ortho:
             return np.abs(cos_hit) / self.window_area
-        return self.pdf_dir(d) * np.abs(cos_hit) / np.maximum(dist, 1e-30) ** 2
+        return self.pdf_dir(d) * np.abs(cos_hit) / np.maximum(dist * dist, 1e-60)
 
     # ----------------------------------------------------------- light tracing
     def raster_of(self, p: NDArray) -> tuple[NDArray, NDArray]:
@@ -174,7 +174,7 @@ class Camera:
         cos_cam = -(wi @ self.forward)
         valid &= (cos_cam > 1e-8) & (dist > 0)
         c = np.where(valid, cos_cam, 1.0)
-        factor = np.where(valid, 1.0 / (self.pixel_area * c**3 * np.maximum(dist, 1e-30) ** 2), 0.0)
+        factor = np.where(valid, 1.0 / (self.pixel_area * c**3 * np.maximum(dist * dist, 1e-60)), 0.0)
         return CameraConnection(raster, wi, dist, factor, valid)
 
 

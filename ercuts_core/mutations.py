@@ -120,13 +120,18 @@ def lens_perturbation(ctx: MutationContext, x: PathBatch, rng: np.random.Generat
 
 # ----------------------------------------------------------------------------- caustic
 def _jacobian(scene: BuiltScene, paths: PathBatch) -> NDArray:
-    """J = cos³θ_cam·|x0x1|²/|x1x2|² (raster → direction at x2, up to the constant A_pix)."""
-    d01 = paths.p[:, 1] - paths.p[:, 0]
-    d12 = paths.p[:, 1] - paths.p[:, 2]
-    w01, l01 = _unit(d01)
-    l12 = np.linalg.norm(d12, axis=1)
-    cos = np.maximum(w01 @ scene.camera.forward, 1e-12)
-    return cos**3 * l01**2 / np.maximum(l12, 1e-300) ** 2
+    """|dω/du| up to the constant A_pix: the raster → direction-at-x2 Jacobian.
+
+    dω_cam = A_pix·cos³θ du, dA(x1) = |x0x1|²·dω_cam/|cos₀₁|, dω = |cos₁₂|·dA(x1)/|x1x2|², so
+    J = cos³θ·|x0x1|²·|cos₁₂| / (|x1x2|²·|cos₀₁|) with the cosines taken at x1's normal.
+    """
+    w01, l01 = _unit(paths.p[:, 0] - paths.p[:, 1])
+    w12, l12 = _unit(paths.p[:, 2] - paths.p[:, 1])
+    n1 = paths.ng[:, 1]
+    cos = np.maximum(-(w01 @ scene.camera.forward), 1e-12)
+    cos01 = np.maximum(np.abs(_dot(n1, w01)), 1e-12)
+    cos12 = np.abs(_dot(n1, w12))
+    return cos**3 * l01 * l01 * cos12 / (np.maximum(l12 * l12, 1e-300) * cos01)
 
 
 def caustic_perturbation(ctx: MutationContext, x: PathBatch, rng: np.random.Generator) -> Proposal:
@@ -185,7 +190,7 @@ def _walk_pdf(scene: BuiltScene, paths: PathBatch, rows: NDArray, j: NDArray) ->
     wo, _ = _unit(prev2 - prev)
     wi, dist = _unit(cur - prev)
     bsdf = Bsdf.from_table(scene.materials, paths.mat[rows, j - 1], paths.ns[rows, j - 1], paths.ng[rows, j - 1])
-    return bsdf.pdf(wo, wi) * np.abs(_dot(paths.ng[rows, j], wi)) / np.maximum(dist, 1e-300) ** 2
+    return bsdf.pdf(wo, wi) * np.abs(_dot(paths.ng[rows, j], wi)) / np.maximum(dist * dist, 1e-300)
 
 
 def _light_vertex_pdf(scene: BuiltScene, paths: PathBatch, rows: NDArray) -> NDArray:
@@ -246,7 +251,7 @@ def bidirectional_mutation(ctx: MutationContext, x: PathBatch, rng: np.random.Ge
         r, bs_pdf, wi = r[ok], bs.pdf[ok], bs.wi[ok]
         s = surf.subset(np.flatnonzero(ok))
         _set_vertex(y, r, j, s.p, s.ng, s.ns, s.mat)
-        p_new[r] *= bs_pdf * np.abs(_dot(s.ng, wi)) / np.maximum(s.t, 1e-300) ** 2
+        p_new[r] *= bs_pdf * np.abs(_dot(s.ng, wi)) / np.maximum(s.t * s.t, 1e-300)
         cur_wo[r] = -wi
     # Close the gap: connect to the kept suffix, or sample a new light vertex.
     keep = valid & ~to_light

@@ -87,7 +87,9 @@ class PathBatch:
         self.light[idx] = other.light
 
     def copy(self) -> "PathBatch":
-        return self.take(slice(None))
+        """A deep copy (``take`` with a slice would return views)."""
+        return PathBatch(*(getattr(self, f).copy() for f in
+                           ("raster", "p", "ng", "ns", "mat", "k", "light")))
 
     @staticmethod
     def concat(parts: list["PathBatch"]) -> "PathBatch":
@@ -161,8 +163,8 @@ def contribution(scene: BuiltScene, paths: PathBatch, infinite_dir: NDArray | No
         # Conversion at the next vertex: area (surfaces), 1/d² (point), 1 (infinite).
         k_next = kind[r]
         surf_next = ~last_edge | (k_next == AREA) | (k_next == TRI)
-        conv = np.where(surf_next, np.abs(_dot(paths.ng[r, i + 1], wi)) / np.maximum(dist, 1e-300) ** 2,
-                        np.where(inf_edge, 1.0, 1.0 / np.maximum(dist, 1e-300) ** 2))
+        conv = np.where(surf_next, np.abs(_dot(paths.ng[r, i + 1], wi)) / np.maximum(dist * dist, 1e-300),
+                        np.where(inf_edge, 1.0, 1.0 / np.maximum(dist * dist, 1e-300)))
         term = fr * conv[:, None]
         f[r] *= term
         if i == 1:
@@ -224,5 +226,3 @@ def edge_visible(scene: BuiltScene, paths: PathBatch, i: NDArray) -> NDArray:
     return vis
 
 
-def luminance_of(rgb: NDArray) -> NDArray:
-    return luminance(rgb)

@@ -182,5 +182,24 @@ def point_lit_box(width: int = 24, height: int = 18) -> SceneDescription:
     return SceneDescription(b.mesh(), mats, cam, point_lights=pl, object_names=tuple(b.names))
 
 
-SCENES = {"s_corridor": s_corridor, "cornell_box": cornell_box, "furnace": furnace,
+def closed_room(width: int = 48, height: int = 36) -> SceneDescription:
+    """A closed 3 m × 2.5 m × 3 m room with a block, lit by a ceiling area light.
+
+    Closed and diffuse: all light stays inside (no background, nothing escapes), the
+    light is invisible to the camera (area lights are next-event only), so every pixel's
+    light has a surface x2 — the whole image is the VPLs' job.
+    """
+    b = _Builder()
+    b.box((-1.5, 0, -1.5), (1.5, 2.5, 1.5), 0, b.object("Room"), inward=True)
+    b.box((-0.9, 0, -0.9), (-0.1, 1.1, -0.1), 1, b.object("Block"))
+    b.box((0.3, 0, 0.2), (1.0, 0.5, 0.9), 2, b.object("Low block"))
+    mats = MaterialTable(["Walls", "Ochre", "Teal"], [[0.7, 0.7, 0.7], [0.7, 0.5, 0.2], [0.2, 0.5, 0.5]],
+                         [1, 1, 1], [0, 0, 0], [0, 0, 0], np.zeros((3, 3)))
+    area = AreaLights([[0.6, 2.49, -0.6]], [[0.3, 0, 0]], [[0, 0, 0.3]], [[0, -1, 0]],
+                      [[30.0, 28.0, 24.0]], [0], [b.object("Ceiling light")])
+    cam = _camera((0.0, 1.4, 1.45), (-0.2, 0.7, -1.0), width, height, lens=18.0)
+    return SceneDescription(b.mesh(), mats, cam, area_lights=area, object_names=tuple(b.names))
+
+
+SCENES = {"closed_room": closed_room, "s_corridor": s_corridor, "cornell_box": cornell_box, "furnace": furnace,
           "point_lit_box": point_lit_box}

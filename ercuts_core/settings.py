@@ -63,11 +63,11 @@ class RenderSettings:
     multichain_perturbation: bool = True
     bidirectional_mutation: bool = True
     max_cut_size: int = 1000
-    clamp: float = 0.01
+    clamp: float = 0.02
     gather: str = "LIGHTCUTS"
     seeding: str = "BDPT"
     shading_samples: int = 1
-    e1_samples: int = 64
+    e1_samples: int = 256
 
     def __post_init__(self):
         if self.integrator not in INTEGRATORS:

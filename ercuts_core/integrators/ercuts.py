@@ -114,6 +114,7 @@ class ErcutsIntegrator:
         t0 = time.perf_counter()
         gather, cut = self._gather(g, vpls, tree, gmax, clock, stats)
         timings["cuts"] = time.perf_counter() - t0
+        gather = self._conserve_energy(gather, vpls, P, stats)
         self._finish(film, direct + gather, vpls, g, chains, cut)
 
     def _deadline(self, clock, share: float) -> float | None:
@@ -246,6 +247,22 @@ class ErcutsIntegrator:
             return scene.tracer.visible(p[k], ng[k], q, qn)
 
         return ShadingPoints(p, g.ns[idx], wo, f_bound[idx], eval_f, visible)
+
+    def _conserve_energy(self, gather: NDArray, vpls, P: float, stats: dict) -> NDArray:
+        """Scale the VPL image so that its energy is P (paper §3.3: every path carries P/n).
+
+        Each VPL is normalised by its own estimate Ê1 (vpl.py); the average of 1/Ê1 is
+        biased high (Jensen), a few per cent with 256 light-traced samples. The ratio
+        P / E(VPL image) removes that bias globally while the per-VPL Ê1 keep the relative
+        intensities. The raw ratio is reported as ``vpl_energy_ratio`` (1 = unbiased).
+        """
+        energy = float(luminance(gather + vpls.fallback).sum())
+        stats["vpl_energy_ratio"] = energy / P if P > 0 else 0.0
+        if energy <= 0 or P <= 0 or stats.get("gather_incomplete"):
+            return gather
+        scale = P / energy
+        vpls.fallback *= scale
+        return gather * scale
 
     # ------------------------------------------------------------------ output
     def _chain_stats(self, stats: dict, chains, n_states: int) -> None:

@@ -29,6 +29,10 @@ PRINCIPLED_V4 = VERSION >= (4, 0, 0)
 USE_NODES_DEPRECATED = VERSION >= (5, 0, 0)
 #: Area lights: L = P/(π·A) from 4.0 on, P/(4·A) before (Cycles commit a21af93e6).
 AREA_LIGHT_PI_NORMALISATION = VERSION >= (4, 0, 0)
+#: Spot lights: before 4.0 Cycles multiplies the cone's smoothstep by cos θ (θ = angle to
+#: the spot axis); from 4.0 on it is the smoothstep alone (measured with Cycles 3.4.1
+#: and 5.0.1: off-axis ratio spot/point = cos θ·smoothstep vs smoothstep).
+SPOT_COSINE_FALLOFF = VERSION < (4, 0, 0)
 
 
 # --------------------------------------------------------------------------- render result

@@ -2,7 +2,10 @@
 
 :class:`ErcutsRenderSettings` mirrors ``ercuts_core.settings.RenderSettings``
 one-to-one: the same property names and defaults (a test checks it), plus a
-description on every property. :meth:`ErcutsRenderSettings.to_core` turns it into the
+description on every property. Defaults are read from the core when it can be
+imported at registration (the literals here are the fallback for a Blender whose Python
+lacks numpy), so a changed core default does not need an add-on change; a new or
+renamed setting does, and the mirror test says which. :meth:`ErcutsRenderSettings.to_core` turns it into the
 core's frozen dataclass.
 """
 from __future__ import annotations
@@ -28,6 +31,24 @@ SEEDING_ITEMS = (
 )
 
 
+def _core_defaults() -> dict:
+    """``RenderSettings()`` as a dict, or {} when the core cannot be imported here."""
+    try:
+        from ercuts_core.settings import RenderSettings
+    except Exception as exc:  # noqa: BLE001 - e.g. no numpy in this Python: use the fallbacks
+        print(f"Ercuts: core settings not importable ({exc}); using built-in defaults")
+        return {}
+    return RenderSettings().to_dict()
+
+
+_CORE_DEFAULTS = _core_defaults()
+
+
+def _default(name: str, fallback):
+    """The core's default for ``name`` (so the two cannot drift apart), else ``fallback``."""
+    return _CORE_DEFAULTS.get(name, fallback)
+
+
 def _get_film_transparent(self):
     return bool(self.id_data.render.film_transparent)
 
@@ -43,33 +64,33 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         name="Integrator",
         description="Light transport algorithm",
         items=INTEGRATOR_ITEMS,
-        default="BDPT",
+        default=_default("integrator", "BDPT"),
     )
     samples: IntProperty(
         name="Samples",
         description="Number of samples per pixel",
-        default=16, min=1, soft_max=4096,
+        default=_default("samples", 16), min=1, soft_max=4096,
     )
     seed: IntProperty(
         name="Seed",
         description="Random seed; the same seed and settings give the same image",
-        default=0, min=0,
+        default=_default("seed", 0), min=0,
     )
     max_depth: IntProperty(
         name="Max Bounces",
         description="Maximum number of bounces of a light path (1 = direct light only)",
-        default=8, min=1, soft_max=64, max=1024,
+        default=_default("max_depth", 8), min=1, soft_max=64, max=1024,
     )
     rr_depth: IntProperty(
         name="Russian Roulette Depth",
         description="Number of bounces before paths may be terminated at random (Russian roulette)",
-        default=3, min=0, soft_max=64,
+        default=_default("rr_depth", 3), min=0, soft_max=64,
     )
     time_limit: FloatProperty(
         name="Time Limit",
         description=("Maximum time in seconds for the whole render, scene export included "
                      "(0 = no limit); the image rendered so far is kept when it runs out"),
-        default=0.0, min=0.0, soft_max=3600.0, unit="TIME_ABSOLUTE",
+        default=_default("time_limit", 0.0), min=0.0, soft_max=3600.0, unit="TIME_ABSOLUTE",
     )
     film_transparent: BoolProperty(
         name="Transparent",
@@ -82,82 +103,82 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
     batch_rays: IntProperty(
         name="Batch Rays",
         description="Rays traced per wavefront batch (more uses more memory but less overhead)",
-        default=1 << 17, min=1024, soft_max=1 << 22,
+        default=_default("batch_rays", 1 << 17), min=1024, soft_max=1 << 22,
     )
     threads: IntProperty(
         name="Threads",
         description=("Threads used to trace rays (0 = all cores, or Blender's fixed "
                      "Performance > Threads / -t setting)"),
-        default=0, min=0, soft_max=256,
+        default=_default("threads", 0), min=0, soft_max=256,
     )
 
     max_error: FloatProperty(
         name="Max Error",
         description="Lightcut error threshold, relative to the pixel estimate (0.02 = Weber's law)",
-        default=0.02, min=0.0, max=1.0, precision=3,
+        default=_default("max_error", 0.02), min=0.0, max=1.0, precision=3,
     )
     chains_per_pixel: FloatProperty(
         name="Chains per Pixel",
         description="Average number of energy-redistribution chains started per pixel",
-        default=0.25, min=0.0, soft_max=16.0,
+        default=_default("chains_per_pixel", 0.25), min=0.0, soft_max=16.0,
     )
     chain_length: IntProperty(
         name="Chain Length",
         description="Mutation steps per chain; every step deposits a share of the chain's energy",
-        default=100, min=1, soft_max=10000,
+        default=_default("chain_length", 100), min=1, soft_max=10000,
     )
     lens_perturbation: BoolProperty(
         name="Lens Perturbation",
         description="Use Veach's lens perturbation (moves the image point of a path)",
-        default=True,
+        default=_default("lens_perturbation", True),
     )
     caustic_perturbation: BoolProperty(
         name="Caustic Perturbation",
         description="Use Veach's caustic perturbation (moves the light end of a path)",
-        default=True,
+        default=_default("caustic_perturbation", True),
     )
     multichain_perturbation: BoolProperty(
         name="Multi-chain Perturbation",
         description="Use Veach's multi-chain perturbation (several specular chains)",
-        default=True,
+        default=_default("multichain_perturbation", True),
     )
     bidirectional_mutation: BoolProperty(
         name="Bidirectional Mutation",
         description="Use bidirectional mutations (replace a sub-path), for large changes",
-        default=True,
+        default=_default("bidirectional_mutation", True),
     )
     max_cut_size: IntProperty(
         name="Max Cut Size",
         description="Largest lightcut (number of light-tree nodes) evaluated per shading point",
-        default=1000, min=1, soft_max=100000,
+        default=_default("max_cut_size", 1000), min=1, soft_max=100000,
     )
     clamp: FloatProperty(
         name="VPL Clamp",
         description=("Virtual point light clamp: minimum distance as a fraction of the scene's "
                      "bounding diagonal (0 = off); the removed energy is reported"),
-        default=0.01, min=0.0, soft_max=0.5, precision=3,
+        default=_default("clamp", 0.02), min=0.0, soft_max=0.5, precision=3,
     )
     gather: EnumProperty(
         name="Gather",
         description="How shading points collect light from the virtual point lights",
         items=GATHER_ITEMS,
-        default="LIGHTCUTS",
+        default=_default("gather", "LIGHTCUTS"),
     )
     seeding: EnumProperty(
         name="Seeding",
         description="Which paths start the energy-redistribution chains",
         items=SEEDING_ITEMS,
-        default="BDPT",
+        default=_default("seeding", "BDPT"),
     )
     shading_samples: IntProperty(
         name="Shading Samples",
         description="Shading points (camera rays) per pixel for the virtual point light gather",
-        default=1, min=1, soft_max=64,
+        default=_default("shading_samples", 1), min=1, soft_max=64,
     )
     e1_samples: IntProperty(
         name="Normalisation Samples",
         description="Shading points per virtual point light used to normalise its intensity",
-        default=64, min=1, soft_max=4096,
+        default=_default("e1_samples", 256), min=1, soft_max=4096,
     )
 
     def to_core(self, **overrides):

@@ -150,12 +150,15 @@ def render_settings(width, height, max_depth=8):
     s.view_settings.view_transform = "Standard"  # the same look in 3.4 (Filmic) and 5.0 (AgX)
     s.render.image_settings.file_format = "PNG"
     s.render.filepath = "//render/" + os.path.splitext(bpy.path.basename(s.name))[0]
-    # Cycles, for comparisons: the same bounce limit, no denoiser, a narrow filter.
+    # Cycles, for comparisons: the same path length (Cycles counts bounces after the first
+    # hit, so max_bounces = max_depth − 1; 0 = direct light only), no denoiser, box filter.
     s.cycles.samples = 256
-    s.cycles.max_bounces = max_depth
+    s.cycles.max_bounces = max_depth - 1
     for key in ("diffuse_bounces", "glossy_bounces", "transmission_bounces", "volume_bounces"):
-        setattr(s.cycles, key, max_depth)
+        setattr(s.cycles, key, max_depth - 1)
     s.cycles.use_denoising = False
+    s.cycles.pixel_filter_type = "BOX"
+    s.cycles.filter_width = 1.0
     s.cycles.caustics_reflective = s.cycles.caustics_refractive = True
     s.cycles.sample_clamp_indirect = 0.0
     try:  # register the engine from this repository if we can
@@ -229,6 +232,8 @@ SCENES = {"s_corridor": build_s_corridor, "cornell_box": build_cornell_box}
 
 def save(path):
     bpy.ops.wm.save_as_mainfile(filepath=path, compress=True, relative_remap=True)
+    if os.path.exists(path + "1"):  # Blender's backup of the file it overwrote
+        os.remove(path + "1")
     print(f"build_scenes: saved {path} ({os.path.getsize(path) / 1024:.0f} KiB)")
 
 

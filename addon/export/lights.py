@@ -43,6 +43,11 @@ class LightCollector:
         kind = light.type
         if kind in {"POINT", "SPOT"}:
             spot = kind == "SPOT"
+            if spot and compat.SPOT_COSINE_FALLOFF:
+                # The description has no cos θ term yet (see compat.SPOT_COSINE_FALLOFF).
+                self.warnings.append(
+                    f"Light '{name}': Blender 3.x spot lights also dim by cos θ inside the cone; "
+                    "Ercuts renders the Blender 4+ spot (no cosine), brighter off-axis")
             self.points.append(dict(
                 position=position,
                 intensity=rgb / (4.0 * math.pi),

@@ -56,6 +56,7 @@ def test_properties_mirror_render_settings():
     own = {p.identifier for p in rna} - {"rna_type", "name"}
     assert own == set(names)
     defaults = RenderSettings()
+    assert properties._CORE_DEFAULTS == defaults.to_dict()  # defaults come from the core
     for name in names:
         prop = rna[name]
         assert prop.description, name

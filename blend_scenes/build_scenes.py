@@ -29,8 +29,7 @@ ROOT = os.path.dirname(HERE)
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
-V4 = bpy.app.version >= (4, 0, 0)
-V5 = bpy.app.version >= (5, 0, 0)
+from addon import compat  # noqa: E402  (all Blender-version differences; needs only bpy)
 
 
 # --------------------------------------------------------------------------- helpers
@@ -77,14 +76,9 @@ def quads_object(name, quads, material):
     return ob
 
 
-def _enable_nodes(idblock):
-    if not V5:  # 5.0: always on, and the setter is deprecated
-        idblock.use_nodes = True
-
-
 def _material(name, color, shader):
     mat = bpy.data.materials.new(name)
-    _enable_nodes(mat)
+    compat.enable_nodes(mat)
     mat.diffuse_color = (*color, 1.0)
     nt = mat.node_tree
     for node in list(nt.nodes):
@@ -107,12 +101,12 @@ def emitter_material(name, base, radiance):
     """Principled BSDF: diffuse ``base`` (no specular) plus emission = ``radiance``."""
     mat, node = _material(name, base, "ShaderNodeBsdfPrincipled")
     strength = max(radiance)
-    node.inputs["Base Color"].default_value = (*base, 1.0)
-    node.inputs["Roughness"].default_value = 1.0
-    node.inputs["Specular IOR Level" if V4 else "Specular"].default_value = 0.0
-    node.inputs["Emission Color" if V4 else "Emission"].default_value = (
+    compat.principled_input(node, "base_color").default_value = (*base, 1.0)
+    compat.principled_input(node, "roughness").default_value = 1.0
+    compat.principled_input(node, "specular").default_value = 0.0
+    compat.principled_input(node, "emission_color").default_value = (
         *(c / strength for c in radiance), 1.0)
-    node.inputs["Emission Strength"].default_value = strength
+    compat.principled_input(node, "emission_strength").default_value = strength
     return mat
 
 
@@ -133,7 +127,7 @@ def camera(eye, target, lens, sensor_width=36.0):
 
 def black_world():
     world = bpy.data.worlds.new("World")
-    _enable_nodes(world)
+    compat.enable_nodes(world)
     world.color = (0.0, 0.0, 0.0)
     bg = next(n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground")
     bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)

@@ -128,3 +128,46 @@ def test_compat_version_switches():
     scale = compat.area_light_radiance_scale(li, 2.0)
     import math
     assert scale == pytest.approx(1 / (math.pi * 2.0) if v >= (4, 0, 0) else 1 / (4 * 2.0))
+
+
+class _FakeLayout:
+    """Stands in for UILayout (no UI in background mode): checks every drawn property exists."""
+
+    def __init__(self, log):
+        self.log = log
+
+    def prop(self, data, name, **kwargs):
+        assert name in data.bl_rna.properties, f"{type(data).__name__} has no property {name!r}"
+        self.log.append(name)
+
+    def template_node_view(self, ntree, node, socket):
+        assert socket.node == node
+        self.log.append("node_view")
+
+    def label(self, **kwargs):
+        self.log.append("label")
+
+    def separator(self, **kwargs):
+        pass
+
+    def column(self, **kwargs):
+        return self
+
+    row = box = split = column
+
+
+@pytest.mark.parametrize("light_type", ["POINT", "SPOT", "SUN", "AREA"])
+def test_panels_draw(light_type):
+    from addon import compat
+
+    s = bpy.context.scene
+    mat = bpy.data.materials.new("M")
+    compat.enable_nodes(mat)
+    w = bpy.data.worlds.new("W")
+    compat.enable_nodes(w)
+    li = bpy.data.lights.new("L", light_type)
+    ctx = SimpleNamespace(engine="ERCUTS", scene=s, material=mat, world=w, light=li)
+    for cls in ui.classes:
+        log = []
+        cls.draw(SimpleNamespace(layout=_FakeLayout(log)), ctx)  # draw() only uses self.layout
+        assert log, cls.__name__

@@ -63,7 +63,9 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
             pass
         if isinstance(exc, known):
             return str(exc)
-        if isinstance(exc, ImportError):
+        missing = getattr(exc, "name", None) or ""
+        if isinstance(exc, ModuleNotFoundError) and missing.split(".")[0] in {
+                "numpy", "embreex", "ercuts_core"}:
             return (f"cannot load the Ercuts core ({exc}); numpy, embreex and ercuts_core "
                     "must be importable by Blender's Python")
         return f"{type(exc).__name__}: {exc} (see the console for details)"

@@ -140,6 +140,16 @@ def test_core_failure_is_reported_as_error(tmp_path, monkeypatch):
     assert not (tmp_path / "boom.exr").exists()
 
 
+def test_missing_dependency_message(tmp_path, monkeypatch):
+    def missing(*args, **kwargs):
+        raise ModuleNotFoundError("No module named 'embreex'", name="embreex")
+
+    monkeypatch.setattr(ercuts_core, "render", missing)
+    _scene()
+    with pytest.raises(RuntimeError, match="cannot load the Ercuts core .* embreex"):
+        h.render_exr(tmp_path / "nodeps.exr")
+
+
 def test_scene_error_message_is_passed_through(tmp_path, monkeypatch):
     def reject(*args, **kwargs):
         raise ercuts_core.SceneError("Camera focal length 0 mm must be > 0")

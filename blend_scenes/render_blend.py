@@ -30,7 +30,7 @@ def parse(argv):
     p.add_argument("blend", help=".blend file to render")
     p.add_argument("-o", "--output", help="output path without extension (default: out/<name>)")
     p.add_argument("--samples", type=int)
-    p.add_argument("--integrator", choices=("BDPT", "PATH"))
+    p.add_argument("--integrator", choices=("ERCUTS", "BDPT", "PATH"))
     p.add_argument("--max-depth", type=int)
     p.add_argument("--time-limit", type=float)
     p.add_argument("--seed", type=int)

@@ -47,11 +47,22 @@ class _Clock:
 
     def report(self, fraction: float, message: str) -> bool:
         """Call the progress callback; returns False (and remembers it) when cancelled."""
-        if self.progress is not None and self.progress(float(fraction), message) is False:
-            self.cancelled = True
+        self.poll(fraction, message)
         if self.expired():
             self.cancelled = True
         return not self.cancelled
+
+    def poll(self, fraction: float, message: str) -> bool:
+        """Call the progress callback only (the deadline is the caller's business)."""
+        if self.progress is not None and self.progress(float(fraction), message) is False:
+            self.cancelled = True
+        return not self.cancelled
+
+    def remaining(self) -> float:
+        """Seconds left before the deadline (inf without a time limit)."""
+        if self.deadline is None:
+            return float("inf")
+        return self.deadline - time.perf_counter()
 
 
 def _batch_pixels(n_pixels: int, settings: RenderSettings, max_depth: int) -> int:

@@ -42,6 +42,8 @@ from .base import dot
 
 #: Shares of the remaining time limit per phase.
 _SHARE = {"bdpt": 0.25, "chains": 0.35 / 0.75, "vpl": 0.15 / 0.40}
+#: Absolute lightcut error floor as a fraction of max_error × the mean pixel luminance.
+ABS_FLOOR = 0.1
 #: Shading points per gather batch.
 _GATHER_BATCH = 4096
 
@@ -204,17 +206,24 @@ class ErcutsIntegrator:
         if len(vpls) == 0:
             return self._per_pixel(L, window.n_pixels, g.samples), self._per_pixel(cut[:, None], window.n_pixels, g.samples)
         pts_all = np.flatnonzero(g.valid)
+        # Absolute error floor (algorithm.md §G.6; not in the papers): below a small fraction
+        # of the mean pixel luminance, Weber's law no longer applies (dark pixels would refine
+        # to max_cut_size for errors nobody can see).
+        floor = s.max_error * ABS_FLOOR * stats.get("P", 0.0) / max(window.n_pixels, 1)
         f_bound = bsdf_max_value(scene.materials, g.mat)
         clamp = 0.0 if not np.isfinite(gmax) else gmax
         rays = 0
         clamped = 0.0
         done = 0
+        cap = s.max_cut_size
+        t_start = time.perf_counter()
         for start in range(0, len(pts_all), _GATHER_BATCH):
             idx = pts_all[start:start + _GATHER_BATCH]
             pts = self._shading_points(g, idx, f_bound)
             if s.gather == "LIGHTCUTS":
                 res = lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
-                               max_error=s.max_error, max_cut_size=s.max_cut_size, clamp=clamp)
+                               max_error=s.max_error, max_cut_size=cap, clamp=clamp,
+                               abs_floor=floor)
                 L[idx], cut[idx] = res.radiance, res.cut_size
                 rays += res.shadow_rays
                 clamped += res.clamped_energy
@@ -223,9 +232,15 @@ class ErcutsIntegrator:
                 cut[idx] = len(vpls)
                 rays += len(idx) * len(vpls)
             done = start + len(idx)
-            if not clock.report(0.7 + 0.3 * done / max(len(pts_all), 1), "Ercuts: lightcuts"):
+            cap = self._fit_cap(cap, cut[idx].mean(), done, len(pts_all) - done,
+                                time.perf_counter() - t_start, clock.remaining())
+            if not clock.poll(0.7 + 0.3 * done / max(len(pts_all), 1), "Ercuts: lightcuts") or \
+                    (done < len(pts_all) and clock.remaining() <= 0):
                 stats["gather_incomplete"] = 1
+                clock.cancelled = True
                 break
+        if cap < s.max_cut_size:
+            stats["cut_cap_for_time_limit"] = cap
         valid_cut = cut[pts_all[:done]] if done else np.zeros(1)
         stats["cut_size_mean"] = float(valid_cut.mean()) if done else 0.0
         stats["cut_size_max"] = int(valid_cut.max()) if done else 0
@@ -233,6 +248,21 @@ class ErcutsIntegrator:
         stats["clamped_energy"] = clamped / g.samples
         return (self._per_pixel(L, window.n_pixels, g.samples),
                 self._per_pixel(cut[:, None], window.n_pixels, g.samples))
+
+    @staticmethod
+    def _fit_cap(cap: int, mean_cut: float, done: int, left: int, elapsed: float, remaining: float) -> int:
+        """Lower the cut-size cap so that the rest of the gather fits the time left.
+
+        A complete image with smaller cuts beats a partial one; the cost per point is
+        taken as proportional to the mean cut size so far.
+        """
+        if left == 0 or not np.isfinite(remaining) or done == 0:
+            return cap
+        projected = elapsed / done * left
+        if projected <= remaining:
+            return cap
+        scale = max(remaining, 0.0) / projected * 0.8
+        return int(max(1, min(cap, mean_cut * scale)))
 
     def _shading_points(self, g: GBuffer, idx: NDArray, f_bound: NDArray) -> ShadingPoints:
         scene = self.scene

@@ -212,7 +212,6 @@ def test_furnace_every_pixel_is_one():
     assert (p >= level).mean() >= 0.99
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("name, make, kw", [
     ("cornell_mesh", lambda: cornell_box(24, 18, "mesh"), {}),
     ("cornell_area", lambda: cornell_box(24, 18, "area"), {}),
@@ -224,6 +223,7 @@ def test_furnace_every_pixel_is_one():
     ("ortho", lambda: ortho_cornell(24, 18), {}),
 ])
 def test_bdpt_agrees_with_path(name, make, kw):
+    """3–8 s each: K = 10 renders per integrator at 24×18 (PATH 32 spp, BDPT 16 spp)."""
     _compare(make(), **kw)
 
 
@@ -275,3 +275,30 @@ def test_orthographic_camera_has_no_light_tracing_strategy():
     film, images = _render_with_strategies(desc, RenderSettings(integrator="BDPT", samples=2))
     assert not any(t == 1 for _, t in images) and film.splat.sum() == 0
     assert film.color.sum() > 0 and film.nonfinite == 0
+
+
+def test_seed_paths_are_valid_paths_whose_energy_matches_path_tracer_seeds():
+    """ERCUTS seeding: BDPT seeds are unoccluded target-class paths with f > 0 whose raster
+    position is x1's projection, and Σe estimates the same energy as path-traced seeds."""
+    from ercuts_core.initialization import seeds_from_path_tracer
+    from ercuts_core.integrators.bdpt import seed_paths
+    from ercuts_core.paths import contribution, edge_visible, is_target
+
+    scene = BuiltScene(sanitize(cornell_box(16, 12, "mesh")).desc)
+    settings = RenderSettings(max_depth=5)
+    paths, e = seed_paths(scene, settings, np.random.default_rng(0))
+    assert len(paths) > 0 and paths.slots == settings.max_depth + 2
+    assert (e > 0).all() and is_target(scene, paths).all()
+    assert (contribution(scene, paths).max(axis=1) > 0).all()
+    for i in range(int(paths.k.max())):
+        m = paths.k > i
+        assert edge_visible(scene, paths.take(m), np.full(int(m.sum()), i)).all()
+    raster, inside = scene.camera.raster_of(paths.p[:, 1])
+    assert inside.all() and np.abs(raster - paths.raster).max() < 1e-4
+    # Σe over one sample per pixel: same expectation as the path tracer's seeds
+    eb = np.array([seed_paths(scene, settings, np.random.default_rng(s))[1].sum() for s in range(30)])
+    ep = np.array([seeds_from_path_tracer(scene, settings.max_depth, np.random.default_rng(100 + s))[1].sum()
+                   for s in range(30)])
+    se = np.sqrt(eb.var(ddof=1) / len(eb) + ep.var(ddof=1) / len(ep))
+    assert abs(eb.mean() - ep.mean()) < 4 * se, (eb.mean(), ep.mean(), se)
+    scene.close()

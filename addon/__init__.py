@@ -16,7 +16,7 @@ bl_info = {
     "version": (0, 1, 0),
     "blender": (3, 4, 0),
     "location": "Properties > Render > Render Engine > Ercuts",
-    "description": "Render engine for scenes lit mostly by indirect light (BDPT, path tracing)",
+    "description": "Render engine for scenes lit mostly by indirect light (ER chains + VPL lightcuts, BDPT, path tracing)",
     "category": "Render",
 }
 

@@ -66,8 +66,11 @@ class _Clock:
 
 
 def _batch_pixels(n_pixels: int, settings: RenderSettings, max_depth: int) -> int:
-    """Pixels per batch: about ``batch_rays`` rays per bounce."""
-    return int(max(1024, min(n_pixels, settings.batch_rays)))
+    """Pixels per batch: about ``batch_rays`` rays per bounce for PATH; a quarter of that for
+    BDPT, whose batch holds two subpaths and all their connections (a batch then stays well
+    under a second, so the time limit and cancellation are honoured promptly)."""
+    per = settings.batch_rays if settings.integrator == "PATH" else settings.batch_rays // 4
+    return int(max(1024, min(n_pixels, per)))
 
 
 def render(desc: SceneDescription, settings: RenderSettings | None = None,

@@ -46,7 +46,7 @@ class RenderSettings:
         e1_samples: shading points per VPL for its intensity normalisation (P*).
     """
 
-    integrator: str = "BDPT"
+    integrator: str = "ERCUTS"
     samples: int = 16
     seed: int = 0
     max_depth: int = 8

@@ -120,6 +120,14 @@ class VPLSet:
         return len(self.count)
 
 
+def _chunks(V: int, n_samples: int, chunk: int):
+    """Yield (v, vv, s): VPL ids of a chunk, each repeated ``n_samples`` times, and its start."""
+    per = max(1, chunk // n_samples)
+    for s in range(0, V, per):
+        v = np.arange(s, min(V, s + per))
+        yield v, np.repeat(v, n_samples), s
+
+
 def estimate_e1(scene: BuiltScene, g: GBuffer, window: Window, pos: NDArray, normal: NDArray,
                 color: NDArray, home: NDArray, gmax: float, n_samples: int, rng: np.random.Generator,
                 radius: int = 8, chunk: int = 1 << 18) -> NDArray:
@@ -133,10 +141,7 @@ def estimate_e1(scene: BuiltScene, g: GBuffer, window: Window, pos: NDArray, nor
     y0, y1 = np.maximum(hy - radius, 0), np.minimum(hy + radius, window.height - 1)
     nb_size = (x1 - x0 + 1) * (y1 - y0 + 1)
     total = np.zeros(V)
-    per = max(1, chunk // n_samples)
-    for s in range(0, V, per):
-        v = np.arange(s, min(V, s + per))
-        vv = np.repeat(v, n_samples)
+    for v, vv, s in _chunks(V, n_samples, chunk):
         n = len(vv)
         local = rng.random(n) < 0.5
         px = np.where(local, x0[vv] + (rng.random(n) * (x1 - x0 + 1)[vv]).astype(np.int64),
@@ -169,10 +174,7 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
     cam = scene.camera
     V = len(pos)
     total = np.zeros(V)
-    per = max(1, chunk // n_samples)
-    for s in range(0, V, per):
-        v = np.arange(s, min(V, s + per))
-        vv = np.repeat(v, n_samples)
+    for v, vv, s in _chunks(V, n_samples, chunk):
         n = len(vv)
         local = sample_cosine_hemisphere(rng.random((n, 2)))
         t, b = coordinate_system(normal[vv])

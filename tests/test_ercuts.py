@@ -14,7 +14,7 @@ from ercuts_core.scenes import closed_room, s_corridor
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REF = os.path.join(HERE, "data", "closed_room_48x36_path_2048spp.npz")
-FAST = dict(integrator="ERCUTS", samples=8, chain_length=40, chains_per_pixel=0.5, seeding="PATH")
+FAST = dict(integrator="ERCUTS", samples=8, chain_length=40, chains_per_pixel=0.5)
 
 
 def relmse(img, ref):

@@ -49,18 +49,22 @@ class Integrator:
         raster += rng.random((len(pix), 2))
         return self.camera.generate_rays(raster)
 
-    def record_first_hit(self, film: Film, pix: NDArray, surf: Surface, d: NDArray,
-                         bsdf: Bsdf | None) -> None:
-        """Depth (ray distance, Blender's Z pass), shading normal and albedo at the first hit."""
-        hit = surf.valid
-        depth = np.where(hit, surf.t, 1e10)[:, None]
-        normal = np.where(hit[:, None], surf.ns, 0.0)
+    def record_first_hit(self, film: Film, pix: NDArray, keep: NDArray, surf: Surface | None,
+                         bsdf: "Bsdf | None") -> None:
+        """First-hit AOVs of camera samples ``pix``: depth (ray distance, Blender's Z pass),
+        shading normal and albedo; lanes ``keep`` hit ``surf`` (others: 1e10 and zeros)."""
+        n = len(pix)
+        depth = np.full((n, 1), 1e10)
+        normal = np.zeros((n, 3))
+        albedo = np.zeros((n, 3))
+        if len(keep):
+            depth[keep, 0] = surf.t
+            normal[keep] = surf.ns
+            if bsdf is not None:
+                albedo[keep] = bsdf.albedo()
         film.add_aov("depth", pix, depth)
         film.add_aov("normal", pix, normal)
-        if bsdf is not None:
-            albedo = np.zeros((len(pix), 3))
-            albedo[hit] = bsdf.albedo()
-            film.add_aov("albedo", pix, albedo)
+        film.add_aov("albedo", pix, albedo)
 
     def alpha(self, surf: Surface) -> NDArray:
         """(N,) coverage: 1 for hits, and for misses unless the film is transparent."""

@@ -357,7 +357,7 @@ class BDPTIntegrator(Integrator):
                 path.count[ln] = k + 1
             keep = np.flatnonzero(hit)
             if film is not None and k == 1 and len(keep) == 0:
-                self._record_first(film, pix, keep, None, None)
+                self.record_first_hit(film, pix, keep, None, None)
             if len(keep) == 0:
                 break
             lanes, d, beta, pdf_dir = lanes[keep], d[keep], beta[keep], pdf_dir[keep]
@@ -392,7 +392,7 @@ class BDPTIntegrator(Integrator):
                 break
             bsdf = Bsdf.from_table(scene.materials, surf.mat, ns, ng)
             if film is not None and k == 1:
-                self._record_first(film, pix, keep, surf, bsdf)
+                self.record_first_hit(film, pix, keep, surf, bsdf)
             if last:
                 break
             # Sample the BSDF for the next vertex
@@ -416,20 +416,6 @@ class BDPTIntegrator(Integrator):
             d, pdf_dir = bs.wi[keep], bs.pdf[keep]
             o = tracer.offset(p[keep], ng[keep], d)
         return alpha
-
-    def _record_first(self, film: Film, pix: NDArray, keep: NDArray, surf, bsdf: Bsdf) -> None:
-        """First-hit AOVs as the path tracer records them (misses: depth 1e10, zeros)."""
-        n = len(pix)
-        depth = np.full((n, 1), 1e10)
-        normal = np.zeros((n, 3))
-        albedo = np.zeros((n, 3))
-        if len(keep):
-            depth[keep, 0] = surf.t
-            normal[keep] = surf.ns
-            albedo[keep] = bsdf.albedo()
-        film.add_aov("depth", pix, depth)
-        film.add_aov("normal", pix, normal)
-        film.add_aov("albedo", pix, albedo)
 
     # ================================================================== MIS
     def _ratio_terms(self, rev: NDArray, fwd: NDArray, valid: NDArray, skip: NDArray) -> NDArray:

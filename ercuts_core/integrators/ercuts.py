@@ -15,9 +15,10 @@ background) and direct light from point, spot, sun and environment lights, compu
 by next-event estimation at the shading points — and the VPL gather, plus the ERPT
 fallback of VPLs that lit no sampled pixel.
 
-Time: with ``time_limit`` > 0 each phase gets a share of the remaining time (rough BDPT
-25 %, chains 35 %, VPL normalisation 15 %, the rest for the gather); a phase that runs out
-stops cleanly (fewer passes, shorter chains, a partial gather) and says so in the stats.
+Time: with ``time_limit`` > 0 each phase gets a share of the time left (rough BDPT 15 %,
+chains 30 %, VPL normalisation 15 % — fewer E1 samples per VPL if needed — and the rest for
+the gather, whose cut-size cap is fitted to the time left after each batch); a phase that
+runs out stops cleanly (fewer passes, shorter chains, smaller cuts) and the stats say so.
 """
 from __future__ import annotations
 
@@ -41,11 +42,13 @@ from ..vpl import GBuffer, build_gbuffer, g_clamp, make_vpls
 from .base import dot
 
 #: Shares of the remaining time limit per phase.
-_SHARE = {"bdpt": 0.25, "chains": 0.35 / 0.75, "vpl": 0.15 / 0.40}
+_SHARE = {"bdpt": 0.15, "chains": 0.30 / 0.85, "vpl": 0.15 / 0.55}
+#: Conservative throughput of the E1 estimate (light-traced samples per second, 2 cores).
+_E1_RATE = 1.0e6
 #: Absolute lightcut error floor as a fraction of max_error × the mean pixel luminance.
 ABS_FLOOR = 0.1
 #: Shading points per gather batch.
-_GATHER_BATCH = 4096
+_GATHER_BATCH = 2048
 
 
 class ErcutsIntegrator:
@@ -101,7 +104,12 @@ class ErcutsIntegrator:
         # 3. VPLs.
         t0 = time.perf_counter()
         gmax = g_clamp(scene, s.clamp)
-        vpls = make_vpls(scene, g, chains, e_d, gmax, s.e1_samples, rng)
+        n_e1 = s.e1_samples
+        if clock.deadline is not None:
+            budget = max(clock.remaining(), 0.0) * _SHARE["vpl"]
+            n_e1 = int(min(n_e1, max(16, budget * _E1_RATE / max(int((chains.count > 0).sum()), 1))))
+        stats["e1_samples"] = n_e1
+        vpls = make_vpls(scene, g, chains, e_d, gmax, n_e1, rng)
         timings["vpls"] = time.perf_counter() - t0
         stats["vpls"] = len(vpls)
         stats["vpls_unlit_fallback"] = int(chains.count[chains.count > 0].size - len(vpls))
@@ -138,7 +146,7 @@ class ErcutsIntegrator:
         window = scene.camera.window
         rough = Film(window)
         n = window.n_pixels
-        batch = max(1024, min(n, s.batch_rays))
+        batch = max(1024, min(n, s.batch_rays // 4))
         for k in range(s.samples):
             part = Film(window)
             for start in range(0, n, batch):
@@ -217,8 +225,10 @@ class ErcutsIntegrator:
         done = 0
         cap = s.max_cut_size
         t_start = time.perf_counter()
-        for start in range(0, len(pts_all), _GATHER_BATCH):
-            idx = pts_all[start:start + _GATHER_BATCH]
+        # A small first batch calibrates the cost per point before the cap is fitted.
+        edges = np.unique(np.r_[0, np.arange(min(256, len(pts_all)), len(pts_all), _GATHER_BATCH), len(pts_all)])
+        for start, stop in zip(edges[:-1], edges[1:]):
+            idx = pts_all[start:stop]
             pts = self._shading_points(g, idx, f_bound)
             if s.gather == "LIGHTCUTS":
                 res = lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,

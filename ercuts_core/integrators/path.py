@@ -61,14 +61,15 @@ class PathIntegrator(Integrator):
             # Keep only paths that hit something and may scatter again.
             if depth == s.max_depth:
                 if depth == 0:
-                    self.record_first_hit(film, pix, surf, d, None)
+                    keep = np.flatnonzero(hit)
+                    self.record_first_hit(film, pix, keep, surf.subset(keep), None)
                 break
             keep = np.flatnonzero(hit)
             surf, d, beta, idx = surf.subset(keep), d[keep], beta[keep], idx[keep]
             wo = -d
             bsdf = Bsdf.from_table(scene.materials, surf.mat, surf.ns, surf.ng)
             if depth == 0:
-                self._record(film, pix, keep, surf, bsdf)
+                self.record_first_hit(film, pix, keep, surf, bsdf)
             if len(idx) == 0:
                 break
             if not lights.empty:
@@ -91,19 +92,6 @@ class PathIntegrator(Integrator):
             prev_pdf, prev_p = bs.pdf[keep], surf.p
             o = tracer.offset(surf.p, surf.ng, d)
         film.add_samples(pix, L, alpha)
-
-    def _record(self, film: Film, pix: NDArray, keep: NDArray, surf, bsdf: Bsdf) -> None:
-        """First-hit AOVs (lanes without a hit get depth 1e10, zero normal and albedo)."""
-        n = len(pix)
-        depth = np.full((n, 1), 1e10)
-        normal = np.zeros((n, 3))
-        albedo = np.zeros((n, 3))
-        depth[keep, 0] = surf.t
-        normal[keep] = surf.ns
-        albedo[keep] = bsdf.albedo()
-        film.add_aov("depth", pix, depth)
-        film.add_aov("normal", pix, normal)
-        film.add_aov("albedo", pix, albedo)
 
     def _next_event(self, surf, wo: NDArray, bsdf: Bsdf, rng: np.random.Generator) -> NDArray:
         """(N, 3) direct light at the surfaces: f·|cos|·Li·V·w / pdf."""

@@ -39,12 +39,18 @@ class RenderResult:
         t = self.timings.get("total", 0.0)
         rays = self.stats.get("rays", 0)
         rate = rays / max(self.timings.get("render", t), 1e-9)
-        parts = [
-            f"{self.window[2]}x{self.window[3]} px",
-            f"total {t:.2f} s",
-            f"{int(self.stats.get('samples', 0))} spp",
+        st = self.stats
+        parts = [f"{self.window[2]}x{self.window[3]} px", f"total {t:.2f} s"]
+        if "chains" in st:   # ERCUTS: one gather pass after the rough BDPT image
+            parts += [f"BDPT {int(st.get('bdpt_samples', 0))} spp",
+                      f"{int(st['chains'])} chains x {int(st.get('chain_steps', 0))} steps",
+                      f"{int(st.get('vpls', 0))} VPLs",
+                      f"mean cut {st.get('cut_size_mean', 0):.0f}"]
+        else:
+            parts.append(f"{int(st.get('samples', 0))} spp")
+        parts += [
             f"{rays / 1e6:.2f} M rays ({rate / 1e6:.2f} M rays/s)",
-            f"non-finite samples {int(self.stats.get('nonfinite_samples', 0))}",
+            f"non-finite samples {int(st.get('nonfinite_samples', 0))}",
         ]
         if self.cancelled:
             parts.append("CANCELLED")

@@ -146,11 +146,4 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
 classes = (ErcutsRenderEngine,)
 
 
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)

@@ -215,11 +215,4 @@ PROPERTY_NAMES = ("integrator", "samples", "seed", "max_depth", "rr_depth", "tim
 classes = (ErcutsRenderSettings,)
 
 
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)

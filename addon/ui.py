@@ -48,6 +48,13 @@ def get_panels():
     return panels
 
 
+def _settings_layout(layout, context):
+    """``layout`` in Blender's property-split style, and ``scene.ercuts``."""
+    layout.use_property_split = True
+    layout.use_property_decorate = False
+    return layout, context.scene.ercuts
+
+
 class ErcutsPanel:
     """Mix-in: poll only for the Ercuts engine."""
 
@@ -67,10 +74,7 @@ class ERCUTS_RENDER_PT_sampling(ErcutsPanel, bpy.types.Panel):
     bl_context = "render"
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        settings = context.scene.ercuts
+        layout, settings = _settings_layout(self.layout, context)
         layout.prop(settings, "integrator")
         col = layout.column(align=True)
         col.prop(settings, "samples")
@@ -83,10 +87,7 @@ class ERCUTS_RENDER_PT_light_paths(ErcutsPanel, bpy.types.Panel):
     bl_context = "render"
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        settings = context.scene.ercuts
+        layout, settings = _settings_layout(self.layout, context)
         col = layout.column(align=True)
         col.prop(settings, "max_depth")
         col.prop(settings, "rr_depth")
@@ -100,10 +101,7 @@ class ERCUTS_RENDER_PT_chains(ErcutsPanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        settings = context.scene.ercuts
+        layout, settings = _settings_layout(self.layout, context)
         layout.active = settings.integrator == "ERCUTS"
         layout.prop(settings, "seeding")
         col = layout.column(align=True)
@@ -124,10 +122,7 @@ class ERCUTS_RENDER_PT_lightcuts(ErcutsPanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        settings = context.scene.ercuts
+        layout, settings = _settings_layout(self.layout, context)
         layout.active = settings.integrator == "ERCUTS"
         layout.prop(settings, "gather")
         col = layout.column(align=True)
@@ -157,10 +152,7 @@ class ERCUTS_RENDER_PT_performance(ErcutsPanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        settings = context.scene.ercuts
+        layout, settings = _settings_layout(self.layout, context)
         layout.prop(settings, "threads")
         layout.prop(settings, "batch_rays")
 

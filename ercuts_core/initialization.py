@@ -18,7 +18,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .bsdf import Bsdf
-from .film import Film
 from .integrators.base import power_heuristic
 from .lights import AREA, ENV, POINT, SUN, TRI
 from .paths import PathBatch, is_target
@@ -38,7 +37,7 @@ def seeds_from_path_tracer(scene: BuiltScene, max_depth: int, rng: np.random.Gen
     Returns:
         (S paths, (S,) energies e = Y(w·C) in pixel units); target-class paths only.
     """
-    cam, lights, tracer = scene.camera, scene.lights, scene.tracer
+    cam, tracer = scene.camera, scene.tracer
     w = cam.window
     pix = np.arange(w.n_pixels) if pix is None else pix
     n, K = len(pix), max_depth + 2

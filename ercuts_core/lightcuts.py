@@ -378,7 +378,6 @@ def _criterion(e: _Entries, est: NDArray, total: NDArray, mode: str, max_error: 
     Σ_C L̄_C exceeds max(ε/(1+ε)·L̃, floor) refines its largest-bound nodes, as many as
     would be needed if their children were exact (at least one per round).
     """
-    n_pts = len(total)
     if mode == "total":
         limit = np.maximum(max_error / (1.0 + max_error) * total, abs_floor)
         return e.bound, _prefix_threshold(e, limit)

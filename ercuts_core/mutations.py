@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .bsdf import Bsdf
-from .lights import AREA, ENV, POINT, SUN, TRI
+from .lights import AREA, ENV, SUN, TRI
 from .paths import PathBatch, edge_visible
 from .sampling import coordinate_system
 from .scene import BuiltScene

@@ -28,7 +28,6 @@ from numpy.typing import NDArray
 
 from .bsdf import Bsdf
 from .lights import AREA, ENV, POINT, SUN, TRI
-from .sampling import luminance
 from .scene import BuiltScene
 
 
@@ -113,20 +112,6 @@ def is_target(scene: BuiltScene, paths: PathBatch) -> NDArray:
     kind = light_kind(scene, paths)
     surface_light = (kind == AREA) | (kind == TRI)
     return (paths.k >= 3) | ((paths.k == 2) & surface_light)
-
-
-def direction_to_next(paths: PathBatch, i: NDArray) -> tuple[NDArray, NDArray]:
-    """Unit direction x_i → x_{i+1} and its length (inf toward infinite lights).
-
-    ``i`` is (C,); for i + 1 == k on SUN/ENV the stored direction is used.
-    """
-    rows = np.arange(len(paths))
-    a = paths.p[rows, i]
-    b = paths.p[rows, np.minimum(i + 1, paths.slots - 1)]
-    d = b - a
-    dist = np.linalg.norm(d, axis=1)
-    w = d / np.maximum(dist, 1e-300)[:, None]
-    return w, dist
 
 
 def contribution(scene: BuiltScene, paths: PathBatch, infinite_dir: NDArray | None = None,

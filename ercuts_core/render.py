@@ -65,7 +65,7 @@ class _Clock:
         return self.deadline - time.perf_counter()
 
 
-def _batch_pixels(n_pixels: int, settings: RenderSettings, max_depth: int) -> int:
+def _batch_pixels(n_pixels: int, settings: RenderSettings) -> int:
     """Pixels per batch: about ``batch_rays`` rays per bounce for PATH; a quarter of that for
     BDPT, whose batch holds two subpaths and all their connections (a batch then stays well
     under a second, so the time limit and cancellation are honoured promptly)."""
@@ -131,7 +131,6 @@ def _black_pass(film: Film, scene: BuiltScene, settings: RenderSettings) -> None
     n = film.window.n_pixels
     if settings.film_transparent:
         # Coverage still needs primary rays; one pass suffices for the alpha.
-        from .integrators.base import Integrator
         integ = Integrator(scene, settings)
         pix = np.arange(n)
         o, d = integ.camera_rays(pix, np.random.default_rng(settings.seed))
@@ -149,7 +148,7 @@ def _integrate(scene: BuiltScene, settings: RenderSettings, film: Film, clock: _
     """
     integrator = make_integrator(scene, settings)
     n = film.window.n_pixels
-    batch = _batch_pixels(n, settings, settings.max_depth)
+    batch = _batch_pixels(n, settings)
     t0 = time.perf_counter()
     label = settings.integrator
     for k in range(settings.samples):

@@ -180,6 +180,12 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         description="Shading points per virtual point light used to normalise its intensity",
         default=_default("e1_samples", 256), min=1, soft_max=4096,
     )
+    memory_budget_mb: IntProperty(
+        name="Memory Budget",
+        description=("Memory the render may use, in MiB (0 = no limit); batch sizes follow it and "
+                     "a render whose estimate exceeds it is refused before allocating"),
+        default=_default("memory_budget_mb", 4096), min=0, soft_max=65536,
+    )
 
     def to_core(self, **overrides):
         """The equivalent ``ercuts_core.settings.RenderSettings`` (``overrides`` win)."""
@@ -210,7 +216,7 @@ PROPERTY_NAMES = ("integrator", "samples", "seed", "max_depth", "rr_depth", "tim
                   "film_transparent", "batch_rays", "threads", "max_error", "chains_per_pixel",
                   "chain_length", "lens_perturbation", "caustic_perturbation",
                   "multichain_perturbation", "bidirectional_mutation", "max_cut_size", "clamp",
-                  "gather", "seeding", "shading_samples", "e1_samples")
+                  "gather", "seeding", "shading_samples", "e1_samples", "memory_budget_mb")
 
 classes = (ErcutsRenderSettings,)
 

@@ -44,6 +44,9 @@ class RenderSettings:
         seeding: 'BDPT' (paper: seed chains from bidirectional paths) or 'PATH'.
         shading_samples: shading points (camera rays) per pixel for the VPL gather.
         e1_samples: shading points per VPL for its intensity normalisation (P*).
+        memory_budget_mb: memory the render may allocate, in MiB (0 = no limit); batch
+            sizes are derived from it and a render whose estimate exceeds it even with the
+            smallest batches is refused before allocating (:mod:`ercuts_core.memory`).
     """
 
     integrator: str = "ERCUTS"
@@ -68,6 +71,7 @@ class RenderSettings:
     seeding: str = "BDPT"
     shading_samples: int = 1
     e1_samples: int = 256
+    memory_budget_mb: int = 4096
 
     def __post_init__(self):
         if self.integrator not in INTEGRATORS:
@@ -92,6 +96,8 @@ class RenderSettings:
             raise ValueError("max_cut_size, shading_samples and e1_samples must be >= 1")
         if self.clamp < 0:
             raise ValueError(f"clamp must be >= 0, got {self.clamp}")
+        if self.memory_budget_mb < 0:
+            raise ValueError(f"memory_budget_mb must be >= 0 (0 = no limit), got {self.memory_budget_mb}")
 
     @classmethod
     def from_dict(cls, d: dict) -> "RenderSettings":

@@ -1,8 +1,11 @@
-"""Build and save the project's .blend scenes: the S-corridor (paper Fig. 1) and a Cornell box.
+"""Build and save the project's .blend scenes: the S-corridor (paper Fig. 1), a Cornell box and
+the benchmark scenes (door_ajar, baffled_lamp, directly_lit).
 
-Run with either Blender (pure bpy; numpy is not needed):
+Run with either Blender (the benchmark scenes are converted from ``ercuts_core.scenes`` and
+need numpy, so give Debian's Blender the venv's site-packages):
 
-    blender -b --factory-startup --python blend_scenes/build_scenes.py [-- --outdir DIR]
+    PYTHONPATH=.venv/lib/python3.11/site-packages:. \
+        blender -b --factory-startup --python blend_scenes/build_scenes.py [-- --outdir DIR]
     .venv/bin/python blend_scenes/build_scenes.py [--outdir DIR]
 
 The committed files are saved by Blender 3.4.1 so that they open in 3.4 *and* 5.0
@@ -11,7 +14,9 @@ therefore writes to ``out/blend_scenes/`` instead of overwriting them.
 
 The geometry, materials and cameras are those of ``ercuts_core.scenes`` (the core's
 built-in scenes), converted from the core's Y-up frame to Blender's Z-up frame:
-Blender (x, y, z) = core (x, −z, y). ``tests/blender/test_blend_scenes.py`` checks that
+Blender (x, y, z) = core (x, −z, y). The S-corridor and the Cornell box are written out by
+hand below (quads); the benchmark scenes are converted triangle by triangle from the core's
+description (:func:`build_from_core`), so they cannot drift from it. ``tests/blender/test_blend_scenes.py`` checks that
 exporting these files gives the built-in descriptions.
 """
 from __future__ import annotations
@@ -21,7 +26,7 @@ import os
 import sys
 
 import bpy
-from mathutils import Vector
+from mathutils import Matrix, Vector
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -221,7 +226,46 @@ def build_cornell_box():
     render_settings(160, 120)
 
 
-SCENES = {"s_corridor": build_s_corridor, "cornell_box": build_cornell_box}
+def build_from_core(name):
+    """Convert the core's built-in scene ``name`` (160 × 120): one Blender object per core
+    object (its triangles), Diffuse BSDF or Principled emitter materials, the same camera."""
+    import numpy as np
+
+    from ercuts_core import scenes
+
+    reset(name)
+    desc = scenes.SCENES[name](160, 120)
+    mt = desc.materials
+    mats = [emitter_material(n, tuple(map(float, mt.base_color[i])), tuple(map(float, mt.emission[i])))
+            if mt.emission[i].max() > 0 else diffuse_material(n, tuple(map(float, mt.base_color[i])))
+            for i, n in enumerate(mt.names)]
+    mesh = desc.mesh
+    for oid, oname in enumerate(desc.object_names):
+        tris = mesh.triangles[mesh.object_ids == oid]
+        if len(tris) == 0:
+            continue
+        used, local = np.unique(tris, return_inverse=True)
+        verts = [to_blender(p) for p in mesh.positions[used].astype(np.float64).tolist()]
+        me = bpy.data.meshes.new(oname)
+        me.from_pydata(verts, [], local.reshape(-1, 3).tolist())
+        mids = mesh.material_ids[mesh.object_ids == oid]
+        slots = sorted(set(mids.tolist()))
+        for m in slots:
+            me.materials.append(mats[m])
+        for poly, m in zip(me.polygons, mids.tolist()):
+            poly.material_index = slots.index(m)
+        me.update()
+        bpy.context.scene.collection.objects.link(bpy.data.objects.new(oname, me))
+    c = desc.camera
+    cam = camera((0, 0, 0), (0, 0, -1), c.lens, c.sensor_width)
+    rot = np.array([[1.0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]])  # core → Blender
+    cam.matrix_world = Matrix((rot @ c.world_from_camera).tolist())
+    black_world()
+    render_settings(160, 120)
+
+
+SCENES = {"s_corridor": build_s_corridor, "cornell_box": build_cornell_box,
+          **{n: (lambda n=n: build_from_core(n)) for n in ("door_ajar", "baffled_lamp", "directly_lit")}}
 
 
 def save(path):

@@ -1,5 +1,7 @@
 """Built-in scenes as plain descriptions: the S-corridor of the paper's Fig. 1, a Cornell box,
-and analytic furnace scenes. Used by the command line, the tests and the benchmarks.
+the benchmark scenes (a room lit through a door left ajar, a lamp hidden behind a baffle, a
+directly lit scene) and analytic furnace scenes. Used by the command line, the tests and the
+benchmarks; ``blend_scenes/build_scenes.py`` saves the benchmark scenes as .blend files.
 """
 from __future__ import annotations
 
@@ -201,5 +203,115 @@ def closed_room(width: int = 48, height: int = 36) -> SceneDescription:
     return SceneDescription(b.mesh(), mats, cam, area_lights=area, object_names=tuple(b.names))
 
 
+def _diffuse_table(rows) -> MaterialTable:
+    """Material table from (name, base colour, emission) rows: Lambert only (roughness 1,
+    specular 0), i.e. Blender's Diffuse BSDF, or a Principled emitter without specular."""
+    names = [r[0] for r in rows]
+    n = len(rows)
+    return MaterialTable(names, [r[1] for r in rows], np.ones(n), np.zeros(n), np.zeros(n),
+                         [r[2] for r in rows])
+
+
+def _hinged_panel(b: _Builder, hinge, width: float, height: float, thickness: float,
+                  angle_deg: float, mat: int, obj: int) -> None:
+    """A thin box (a door) of ``width`` along +z from its hinge edge at ``hinge`` (x, 0, z),
+    rotated by ``angle_deg`` about the vertical hinge axis towards +x."""
+    a = np.radians(angle_deg)
+    along = np.array([np.sin(a), 0.0, np.cos(a)])           # from the hinge to the free edge
+    across = np.array([np.cos(a), 0.0, -np.sin(a)])         # door thickness direction
+    h0 = np.asarray(hinge, np.float64)
+    up = np.array([0.0, height, 0.0])
+    c = [h0, h0 + width * along, h0 + width * along + thickness * across, h0 + thickness * across]
+    lo, hi = c, [p + up for p in c]
+    for i in range(4):  # sides, outward (counter-clockwise seen from outside)
+        j = (i + 1) % 4
+        b.quad(lo[i], hi[i], hi[j], lo[j], mat, obj)
+    b.quad(lo[0], lo[3], lo[2], lo[1], mat, obj)            # bottom, −y
+    b.quad(hi[0], hi[1], hi[2], hi[3], mat, obj)            # top, +y
+
+
+def door_ajar(width: int = 160, height: int = 120) -> SceneDescription:
+    """A dark room lit only through a door left ajar (benchmark: indirect light, narrow gap).
+
+    The room is x ∈ [0, 4], z ∈ [0, 4], 2.5 m high; its wall at x = 4 has a 0.9 m × 2.1 m
+    door opening (z ∈ [1.4, 2.3]). The door, hinged at z = 1.4, is opened 9° into the
+    hallway (x ∈ [4, 6]), leaving a wedge-shaped gap of about 0.14 m at its free edge. The
+    only light is a 1 m² emissive panel on the hallway ceiling, so everything the camera sees
+    in the room is lit by light squeezed through the gap and bounced off the hallway walls.
+    """
+    b = _Builder()
+    wall, floor, door, lamp = 0, 1, 2, 3
+    H, x = 2.5, 4.0
+    b.box((0, 0, 0), (6, H, 4), wall, b.object("Shell"), inward=True)
+    sep = b.object("DoorWall")          # the wall between room and hallway, both faces
+    z0, z1, dh = 1.4, 2.3, 2.1
+    for (za, zb, ya, yb) in ((0, z0, 0, H), (z1, 4, 0, H), (z0, z1, dh, H)):
+        b.quad((x, ya, za), (x, ya, zb), (x, yb, zb), (x, yb, za), wall, sep)     # −x face (room)
+        b.quad((x, ya, za), (x, yb, za), (x, yb, zb), (x, ya, zb), wall, sep)     # +x face (hall)
+    _hinged_panel(b, (x, 0.0, z0), z1 - z0 - 0.01, dh - 0.01, 0.04, 9.0, door, b.object("Door"))
+    b.quad((0.02, 0.001, 0.3), (3.0, 0.001, 0.3), (3.0, 0.001, 3.7), (0.02, 0.001, 3.7),
+           floor, b.object("Rug"))
+    light = b.object("HallLamp")
+    b.quad((4.5, H - 0.01, 2.5), (5.5, H - 0.01, 2.5), (5.5, H - 0.01, 3.5), (4.5, H - 0.01, 3.5),
+           lamp, light)
+    mats = _diffuse_table([("Wall", [0.75, 0.75, 0.75], [0, 0, 0]),
+                           ("Rug", [0.55, 0.25, 0.15], [0, 0, 0]),
+                           ("Door", [0.6, 0.5, 0.35], [0, 0, 0]),
+                           ("Lamp", [0.8, 0.8, 0.8], [400.0, 380.0, 340.0])])
+    cam = _camera((0.4, 1.5, 0.4), (4.0, 0.9, 2.6), width, height, lens=18.0)
+    return SceneDescription(b.mesh(), mats, cam, object_names=tuple(b.names))
+
+
+def baffled_lamp(width: int = 160, height: int = 120) -> SceneDescription:
+    """A room whose ceiling lamp hides above a baffle (benchmark: indirect light).
+
+    Room x ∈ [−2.5, 2.5], z ∈ [−2, 2], 2.6 m high. A 0.6 m × 0.6 m emissive panel hangs
+    0.1 m under the ceiling; 0.2 m below it a 2 m × 2 m baffle (a thin box) hides it from
+    the floor and the camera. The emitter lights the ceiling and the baffle's top; the room
+    below is lit only by light bounced off the ceiling.
+    """
+    b = _Builder()
+    wall, blue, wood, lamp = 0, 1, 2, 3
+    H = 2.6
+    b.box((-2.5, 0, -2), (2.5, H, 2), wall, b.object("Room"), inward=True)
+    b.box((-1.0, 2.26, -1.0), (1.0, 2.30, 1.0), wall, b.object("Baffle"))
+    b.box((-1.9, 0, -1.6), (-1.1, 0.9, -0.8), blue, b.object("Cabinet"))
+    b.box((0.6, 0, -0.4), (1.6, 0.75, 0.4), wood, b.object("Table"))
+    y = H - 0.1
+    b.quad((-0.3, y, -0.3), (0.3, y, -0.3), (0.3, y, 0.3), (-0.3, y, 0.3), lamp, b.object("Lamp"))
+    mats = _diffuse_table([("Wall", [0.8, 0.8, 0.8], [0, 0, 0]),
+                           ("Blue", [0.2, 0.3, 0.6], [0, 0, 0]),
+                           ("Wood", [0.6, 0.4, 0.2], [0, 0, 0]),
+                           ("Lamp", [0.8, 0.8, 0.8], [200.0, 190.0, 170.0])])
+    cam = _camera((0.0, 1.3, 1.95), (0.0, 1.1, -2.0), width, height, lens=16.0)
+    return SceneDescription(b.mesh(), mats, cam, object_names=tuple(b.names))
+
+
+def directly_lit(width: int = 160, height: int = 120) -> SceneDescription:
+    """An easy scene lit mostly directly: blocks on an open floor under a large panel.
+
+    A 6 m × 6 m floor (no walls, black world, so little light bounces back), three blocks and
+    a 2 m × 2 m emissive panel 3 m up facing down; the camera sees the lit floor and blocks
+    but not the panel.
+    """
+    b = _Builder()
+    floor, red, white, lamp = 0, 1, 2, 3
+    b.quad((-3, 0, 3), (3, 0, 3), (3, 0, -3), (-3, 0, -3), floor, b.object("Floor"))
+    b.box((-1.2, 0, -0.8), (-0.4, 0.8, 0.0), red, b.object("RedBlock"))
+    b.box((0.2, 0, -1.2), (0.8, 1.4, -0.6), white, b.object("TallBlock"))
+    b.box((0.5, 0, 0.3), (1.3, 0.4, 1.1), white, b.object("LowBlock"))
+    b.quad((-1, 3, -1), (-1, 3, 1), (1, 3, 1), (1, 3, -1), lamp, b.object("Lamp"))
+    mats = _diffuse_table([("Floor", [0.5, 0.5, 0.5], [0, 0, 0]),
+                           ("Red", [0.7, 0.15, 0.1], [0, 0, 0]),
+                           ("White", [0.75, 0.75, 0.75], [0, 0, 0]),
+                           ("Lamp", [0.8, 0.8, 0.8], [5.0, 4.8, 4.4])])
+    cam = _camera((0.0, 2.2, 4.2), (0.0, 0.3, 0.0), width, height, lens=28.0)
+    return SceneDescription(b.mesh(), mats, cam, object_names=tuple(b.names))
+
+
 SCENES = {"closed_room": closed_room, "s_corridor": s_corridor, "cornell_box": cornell_box, "furnace": furnace,
-          "point_lit_box": point_lit_box}
+          "point_lit_box": point_lit_box, "door_ajar": door_ajar, "baffled_lamp": baffled_lamp,
+          "directly_lit": directly_lit}
+
+#: The benchmark scenes, each also saved as ``blend_scenes/<name>.blend`` (160 × 120).
+BENCHMARK_SCENES = ("s_corridor", "cornell_box", "door_ajar", "baffled_lamp", "directly_lit")

@@ -14,7 +14,9 @@ from ercuts_core import scenes
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 BLEND_DIR = os.path.join(ROOT, "blend_scenes")
-NAMES = ["s_corridor", "cornell_box"]
+NAMES = list(scenes.BENCHMARK_SCENES)  # s_corridor, cornell_box and the benchmark scenes
+#: Objects per file (meshes + camera).
+OBJECTS = {"s_corridor": 5, "cornell_box": 7, "door_ajar": 6, "baffled_lamp": 6, "directly_lit": 6}
 
 #: Core (Y-up) coordinates of a Blender (Z-up) point: core (x, y, z) = Blender (x, z, −y).
 CORE_FROM_BLENDER = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
@@ -79,22 +81,34 @@ def test_blend_matches_builtin_scene(name):
     assert np.allclose(desc.world_radiance, 0)
 
 
-def test_s_corridor_light_needs_bounces():
-    """No straight line from the lamp panel to the camera: the walls block it."""
+@pytest.mark.parametrize("name", ["s_corridor", "door_ajar", "baffled_lamp"])
+def test_lamp_hidden_from_camera(name):
+    """Indirect-lit scenes: no straight line joins the camera and any point of the lamp
+    (a 9 × 9 barycentric grid on every lamp triangle); walls, door or baffle block it.
+    On directly_lit, whose lamp the camera does not see either, the same rays are blocked by
+    nothing, which shows the test can fail."""
     from ercuts_core.tracer import Tracer
 
-    _open("s_corridor")
-    desc = h.export().description
-    lamp = desc.materials.names.index("Lamp")
-    tris = desc.mesh.triangles[desc.mesh.material_ids == lamp]
-    lamp_pts = desc.mesh.positions[tris].mean(axis=1)
-    eye = desc.camera.world_from_camera[:3, 3]
-    tracer = Tracer(desc.mesh.positions, desc.mesh.triangles, threads=1)
-    d = lamp_pts - eye
-    dist = np.linalg.norm(d, axis=1)
-    hit = tracer.intersect(np.repeat(eye[None], len(d), 0), d / dist[:, None])
-    assert np.all(hit.t < dist - 0.05)  # something is in the way for every lamp triangle
-    tracer.close()
+    def blocked(scene_name):
+        _open(scene_name)
+        desc = h.export().description
+        lamp = desc.materials.names.index("Lamp")
+        tri = desc.mesh.positions[desc.mesh.triangles[desc.mesh.material_ids == lamp]]
+        u, v = np.meshgrid(np.linspace(0.02, 0.98, 9), np.linspace(0.02, 0.98, 9))
+        keep = (u + v) <= 0.99
+        u, v = u[keep], v[keep]
+        pts = (tri[:, None, 0] * (1 - u - v)[None, :, None] + tri[:, None, 1] * u[None, :, None]
+               + tri[:, None, 2] * v[None, :, None]).reshape(-1, 3)
+        eye = desc.camera.world_from_camera[:3, 3]
+        tracer = Tracer(desc.mesh.positions, desc.mesh.triangles, threads=1)
+        d = pts - eye
+        dist = np.linalg.norm(d, axis=1)
+        hit = tracer.intersect(np.repeat(eye[None], len(d), 0), d / dist[:, None])
+        tracer.close()
+        return hit.t < dist - 0.05
+
+    assert np.all(blocked(name))
+    assert not np.any(blocked("directly_lit"))
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -112,12 +126,12 @@ def test_blend_renders_through_engine(name, tmp_path):
 def test_blend_files_open_in_blender_binary():
     """The committed files open in the installed Blender (Debian's 3.4.1 here)."""
     code = ("import bpy, sys\n"
-            "for n in ('s_corridor', 'cornell_box'):\n"
+            f"for n in {tuple(NAMES)!r}:\n"
             f"    bpy.ops.wm.open_mainfile(filepath='{BLEND_DIR}/' + n + '.blend')\n"
             "    s = bpy.context.scene\n"
             "    print('OPENED', n, s.render.resolution_x, s.render.resolution_y, len(s.objects))\n")
     out = subprocess.run(["blender", "-b", "--factory-startup", "--python-exit-code", "1",
                           "--python-expr", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    assert "OPENED s_corridor 160 120 5" in out.stdout
-    assert "OPENED cornell_box 160 120 7" in out.stdout
+    for name in NAMES:
+        assert f"OPENED {name} 160 120 {OBJECTS[name]}" in out.stdout

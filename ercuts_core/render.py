@@ -16,6 +16,7 @@ import numpy as np
 from .description import SceneDescription
 from .film import Film
 from .integrators.base import Integrator
+from .memory import plan as memory_plan, plan_for
 from .result import RenderResult
 from .scene import BuiltScene
 from .settings import RenderSettings
@@ -68,9 +69,9 @@ class _Clock:
 def _batch_pixels(n_pixels: int, settings: RenderSettings) -> int:
     """Pixels per batch: about ``batch_rays`` rays per bounce for PATH; a quarter of that for
     BDPT, whose batch holds two subpaths and all their connections (a batch then stays well
-    under a second, so the time limit and cancellation are honoured promptly)."""
-    per = settings.batch_rays if settings.integrator == "PATH" else settings.batch_rays // 4
-    return int(max(1024, min(n_pixels, per)))
+    under a second, so the time limit and cancellation are honoured promptly); smaller when
+    the memory budget asks for it (:func:`ercuts_core.memory.plan`)."""
+    return memory_plan(n_pixels, 0, settings).batch_pixels
 
 
 def render(desc: SceneDescription, settings: RenderSettings | None = None,
@@ -94,12 +95,14 @@ def render(desc: SceneDescription, settings: RenderSettings | None = None,
     checked = sanitize(desc)
     timings["validate"] = time.perf_counter() - t0
     clean = checked.desc
+    memory = plan_for(clean, settings)      # raises MemoryBudgetError before allocating
     t0 = time.perf_counter()
     scene = BuiltScene(clean, threads=settings.threads)
     timings["build"] = time.perf_counter() - t0
     window = scene.camera.window
     film = Film(window)
     stats: dict[str, float] = dict(checked.stats)
+    stats["memory_estimate_mb"] = memory.total / (1 << 20)
     try:
         if scene.lights.empty:
             film.passes_done = settings.samples

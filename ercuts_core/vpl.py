@@ -214,8 +214,9 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
 
 
 def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gmax: float,
-              n_samples: int, rng: np.random.Generator) -> VPLSet:
-    """Normalise the chains' VPLs: I_v = k_v·e_d / Ê1(v) · c_v (module docstring)."""
+              n_samples: int, rng: np.random.Generator, chunk: int = 1 << 18) -> VPLSet:
+    """Normalise the chains' VPLs: I_v = k_v·e_d / Ê1(v) · c_v (module docstring); ``chunk``
+    E1 samples are traced together (the memory budget's ``e1_chunk``)."""
     window = scene.camera.window
     used = chains.count > 0
     pos, normal = chains.position[used], chains.normal[used]
@@ -223,11 +224,11 @@ def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gm
     color = chains.color_sum[used] / count[:, None]
     y = luminance(color)
     color = np.where(y[:, None] > 0, color / np.where(y > 0, y, 1.0)[:, None], 0.0)
-    e1 = estimate_e1_light_tracing(scene, pos, normal, color, gmax, n_samples, rng)
+    e1 = estimate_e1_light_tracing(scene, pos, normal, color, gmax, n_samples, rng, chunk)
     miss = e1 <= 0
     if miss.any():   # the emission found no camera-visible point: sample pixels instead
         e1[miss] = estimate_e1(scene, g, window, pos[miss], normal[miss], color[miss], home[miss],
-                               gmax, n_samples, rng)
+                               gmax, n_samples, rng, chunk=chunk)
     lit = e1 > 0
     intensity = np.where(lit[:, None], (count * e_d / np.where(lit, e1, 1.0))[:, None] * color, 0.0)
     fallback = np.zeros((window.n_pixels, 3))

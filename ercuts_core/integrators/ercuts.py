@@ -33,7 +33,9 @@ from ..initialization import rough_image_energy, seeds_from_path_tracer
 from ..light_tree import build_light_tree
 from ..lightcuts import ShadingPoints, brute_force, lightcut
 from ..lights import ENV, POINT, SUN
+from ..memory import plan
 from ..mutations import NAMES, MutationContext
+from ..paths import PathBatch
 from ..er_sampling import chain_starts, run_chains
 from ..sampling import luminance
 from ..scene import BuiltScene
@@ -47,8 +49,6 @@ _SHARE = {"bdpt": 0.15, "chains": 0.30 / 0.85, "vpl": 0.15 / 0.55}
 _E1_RATE = 1.0e6
 #: Absolute lightcut error floor as a fraction of max_error × the mean pixel luminance.
 ABS_FLOOR = 0.1
-#: Shading points per gather batch.
-_GATHER_BATCH = 2048
 
 
 class ErcutsIntegrator:
@@ -57,6 +57,7 @@ class ErcutsIntegrator:
     def __init__(self, scene: BuiltScene, settings: RenderSettings):
         self.scene = scene
         self.settings = settings
+        self.memory = plan(scene.camera.window.n_pixels, scene.desc.mesh.n_triangles, settings)
 
     # ------------------------------------------------------------------ driver
     def render(self, film: Film, clock, timings: dict, stats: dict) -> None:
@@ -78,12 +79,10 @@ class ErcutsIntegrator:
         P = max(P_all - float(luminance(direct).sum()), 0.0)
         stats["P"], stats["P_all"] = P, P_all
         # Seeds: fresh paths, one sample per pixel.
-        seeds, energy = self._seeds(rng)
         n_target = s.chains_per_pixel * s.chain_length * window.n_pixels
         e_d = P / n_target if n_target > 0 else 0.0
-        starts = chain_starts(energy, s.chain_length, e_d, rng)
+        seeds, starts, stats["seed_paths"] = self._chain_seeds(e_d, rng)
         timings["seeds"] = time.perf_counter() - t0
-        stats["seed_paths"] = len(seeds)
         clock.report(0.3, "Ercuts: ER chains")
         # 2. ER chains.
         t0 = time.perf_counter()
@@ -109,7 +108,7 @@ class ErcutsIntegrator:
             budget = max(clock.remaining(), 0.0) * _SHARE["vpl"]
             n_e1 = int(min(n_e1, max(16, budget * _E1_RATE / max(int((chains.count > 0).sum()), 1))))
         stats["e1_samples"] = n_e1
-        vpls = make_vpls(scene, g, chains, e_d, gmax, n_e1, rng)
+        vpls = make_vpls(scene, g, chains, e_d, gmax, n_e1, rng, chunk=self.memory.e1_chunk)
         timings["vpls"] = time.perf_counter() - t0
         stats["vpls"] = len(vpls)
         stats["vpls_unlit_fallback"] = int(chains.count[chains.count > 0].size - len(vpls))
@@ -146,7 +145,7 @@ class ErcutsIntegrator:
         window = scene.camera.window
         rough = Film(window)
         n = window.n_pixels
-        batch = max(1024, min(n, s.batch_rays // 4))
+        batch = self.memory.batch_pixels
         for k in range(s.samples):
             part = Film(window)
             for start in range(0, n, batch):
@@ -161,12 +160,30 @@ class ErcutsIntegrator:
                 break
         return rough, rough.passes_done
 
-    def _seeds(self, rng):
+    def _seeds(self, rng, pix=None):
         s, scene = self.settings, self.scene
         if s.seeding == "BDPT":
             from .bdpt import seed_paths
-            return seed_paths(scene, s, rng)
-        return seeds_from_path_tracer(scene, s.max_depth, rng)
+            return seed_paths(scene, s, rng, pix)
+        return seeds_from_path_tracer(scene, s.max_depth, rng, pix)
+
+    def _chain_seeds(self, e_d: float, rng):
+        """Seed paths and their chain counts, in batches of ``memory.seed_pixels`` pixels; only
+        seeds that start a chain are kept, so the seed memory is that of one batch."""
+        s, n = self.settings, self.scene.camera.window.n_pixels
+        step = self.memory.seed_pixels
+        if step >= n:
+            seeds, energy = self._seeds(rng)
+            starts = chain_starts(energy, s.chain_length, e_d, rng)
+            return seeds, starts, len(seeds)
+        kept, counts, total = [], [], 0
+        for start in range(0, n, step):
+            seeds, energy = self._seeds(rng, np.arange(start, min(n, start + step)))
+            starts = chain_starts(energy, s.chain_length, e_d, rng)
+            kept.append(seeds.take(np.flatnonzero(starts > 0)))
+            counts.append(starts[starts > 0])
+            total += len(seeds)
+        return PathBatch.concat(kept), np.concatenate(counts), total
 
     # ------------------------------------------------------------------ non-VPL light
     def _direct_image(self, g: GBuffer, rng, n_light_samples: int = 4) -> NDArray:
@@ -226,7 +243,8 @@ class ErcutsIntegrator:
         cap = s.max_cut_size
         t_start = time.perf_counter()
         # A small first batch calibrates the cost per point before the cap is fitted.
-        edges = np.unique(np.r_[0, np.arange(min(256, len(pts_all)), len(pts_all), _GATHER_BATCH), len(pts_all)])
+        edges = np.unique(np.r_[0, np.arange(min(256, len(pts_all)), len(pts_all), self.memory.gather_batch),
+                                len(pts_all)])
         for start, stop in zip(edges[:-1], edges[1:]):
             idx = pts_all[start:stop]
             pts = self._shading_points(g, idx, f_bound)

@@ -1,0 +1,206 @@
+"""Memory estimate of a render, and batch sizes that keep it inside the memory budget.
+
+A wavefront renderer's memory is its arrays: what scales with the scene (triangles), with
+the window (films, the ERCUTS G-buffer, chain states, VPLs and the light tree) and with
+the batch (ray state of a batch of camera samples, E1 samples, lightcut entries).
+:func:`plan` adds them up *before anything is allocated* (shared docs,
+style-and-testing.md §2.6: "estimate memory before rendering … choose the batch size from
+a memory budget; error with the estimate if even one tile cannot fit"): the batch sizes
+are the largest the settings ask for that fit what the window-sized arrays leave of
+``RenderSettings.memory_budget_mb``; if even the smallest batches do not fit,
+:class:`MemoryBudgetError` names the estimate and its largest parts.
+
+The per-item sizes below come from the array layouts (float64 unless noted) and were
+checked with ``tracemalloc`` peaks on the S-corridor (``benchmarks/bench_memory.py``
+measures the process's peak RSS). The estimate is of the render's own arrays: the
+host process (Python, numpy, embree, Blender) comes on top.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .settings import RenderSettings
+from .validate import SceneError
+
+MIB = 1 << 20
+
+#: Film channels (float64 accumulators): colour 3, splat 3, alpha 1 and the AOVs depth 1,
+#: normal 3, albedo 3, emission 3, direct 3, indirect 3.
+FILM_CHANNELS = 7 + 16
+#: ERCUTS-only AOVs: cut_size 1, chain_deposits 1, vpl_density 1, er_caustic 3.
+ERCUTS_AOV_CHANNELS = 6
+#: Output per channel: the float32 result plus the float64 temporaries of its conversion.
+OUTPUT_BYTES_PER_CHANNEL = 4 + 8
+#: Bytes per triangle: description (float32 positions, int32 indices, ids), the built
+#: scene's float64 copies and normals, and embree's BVH.
+TRIANGLE_BYTES = 400
+#: PATH ray state per camera sample of a batch (rays, hits, BSDF, light samples).
+PATH_LANE_BYTES = 1600
+#: BDPT state per camera sample and path vertex (two subpaths, MIS pdfs, connection rows).
+BDPT_LANE_VERTEX_BYTES = 600
+#: BDPT connection rows (``max_rows`` = 2^17 rows per round) independent of the batch.
+BDPT_FIXED_BYTES = 80 * MIB
+#: ERCUTS per shading point: G-buffer (positions, normals, directions, hit record) and the
+#: direct-light image with its light-sample temporaries.
+GBUFFER_POINT_BYTES = 700
+#: One path of K vertex slots (position, two normals, material) plus its raster/ids.
+PATH_SLOT_BYTES = 3 * 3 * 8 + 8
+PATH_FIXED_BYTES = 40
+#: Chain state: the current path, the proposals of one lock-step mutation round and the
+#: contribution temporaries, in path sizes.
+CHAIN_PATHS = 3.5
+#: Seed paths per pixel of a seed batch (every BDPT connection strategy may seed).
+SEEDS_PER_PIXEL = 2.0
+#: VPLs in the chains' store per chain (its initial capacity; it doubles when exceeded).
+VPLS_PER_CHAIN = 4
+#: Per VPL: chain store (position, normal, home, count, colour), the VPL set, the light
+#: tree (2 nodes per VPL: bounds, cone, intensity, representative) and its builder.
+VPL_BYTES = 96 + 110 + 2 * 160 + 200
+#: Per E1 sample of a chunk: rays, hits, BSDF and camera connection.
+E1_SAMPLE_BYTES = 900
+#: Per live lightcut entry (point, node, unit radiance, bounds) and refinement temporaries.
+CUT_ENTRY_BYTES = 300
+
+#: Smallest batches the renderer will use, and the largest (the defaults before budgets).
+MIN_BATCH_PIXELS = 1024
+MIN_SEED_PIXELS = 1024
+MIN_E1_CHUNK = 1 << 12
+MAX_E1_CHUNK = 1 << 18
+MIN_GATHER_BATCH = 16
+MAX_GATHER_BATCH = 2048
+
+
+class MemoryBudgetError(SceneError):
+    """The render would need more memory than ``memory_budget_mb`` even with the smallest batches."""
+
+
+@dataclass
+class MemoryPlan:
+    """Batch sizes for a render and the estimate they give.
+
+    Attributes:
+        batch_pixels: camera samples per PATH/BDPT batch (also ERCUTS's rough BDPT image).
+        seed_pixels: pixels per batch of ERCUTS seed paths.
+        e1_chunk: E1 samples traced together when normalising VPLs.
+        gather_batch: shading points per lightcut batch.
+        parts: bytes per part of the estimate: the arrays alive for the whole render and
+            the largest phase's transient arrays.
+        phases: transient bytes of every phase with the chosen batches.
+        budget: the budget in bytes (0 = none).
+    """
+
+    batch_pixels: int
+    seed_pixels: int
+    e1_chunk: int
+    gather_batch: int
+    parts: dict[str, int] = field(default_factory=dict)
+    phases: dict[str, int] = field(default_factory=dict)
+    budget: int = 0
+
+    @property
+    def total(self) -> int:
+        """Estimated peak bytes of the render's arrays."""
+        return int(sum(self.parts.values()))
+
+    def describe(self) -> str:
+        """'1234 MiB (films 500, G-buffer 300, …)': the estimate and its largest parts."""
+        top = sorted(self.parts.items(), key=lambda kv: -kv[1])[:4]
+        return f"{self.total / MIB:.0f} MiB (" + ", ".join(f"{k} {v / MIB:.0f}" for k, v in top) + ")"
+
+
+def path_bytes(max_depth: int) -> int:
+    """Bytes of one padded eye-first path with ``max_depth + 2`` vertex slots (paths.py)."""
+    return (max_depth + 2) * PATH_SLOT_BYTES + PATH_FIXED_BYTES
+
+
+def lane_bytes(settings: RenderSettings) -> int:
+    """Bytes of ray state per camera sample of a PATH or BDPT batch."""
+    if settings.integrator == "PATH":
+        return PATH_LANE_BYTES
+    return BDPT_LANE_VERTEX_BYTES * (settings.max_depth + 1)
+
+
+def fixed_parts(n_pixels: int, n_triangles: int, settings: RenderSettings) -> dict[str, int]:
+    """Bytes alive for the whole render: scene, films and (ERCUTS) window-sized arrays."""
+    s = settings
+    ercuts = s.integrator == "ERCUTS"
+    channels = FILM_CHANNELS + (ERCUTS_AOV_CHANNELS if ercuts else 0)
+    # Films alive at once: the result and one pass (ERCUTS: also the rough BDPT image).
+    films = 3 if ercuts else 2
+    parts = {
+        "scene": n_triangles * TRIANGLE_BYTES,
+        "films": n_pixels * channels * (8 * films + OUTPUT_BYTES_PER_CHANNEL),
+    }
+    if ercuts:
+        parts["G-buffer"] = n_pixels * s.shading_samples * GBUFFER_POINT_BYTES
+        parts["VPLs"] = _chains(n_pixels, s) * VPLS_PER_CHAIN * VPL_BYTES
+    return parts
+
+
+def _chains(n_pixels: int, s: RenderSettings) -> int:
+    """Expected chains Σ⌊U + e/(N·e_d)⌋ ≈ c·n·(seed energy / P), with a margin of 2."""
+    return int(2 * s.chains_per_pixel * n_pixels)
+
+
+def phase_parts(n_pixels: int, settings: RenderSettings, batch: int, seeds: int, e1: int,
+                gather: int) -> dict[str, int]:
+    """Bytes of each phase's transient arrays; phases run one after another, so the peak
+    is the largest of them on top of :func:`fixed_parts`."""
+    s = settings
+    rows = BDPT_FIXED_BYTES if s.integrator != "PATH" else 0
+    parts = {"batch": batch * lane_bytes(s) + rows}
+    if s.integrator == "ERCUTS":
+        parts["seed batch"] = int(seeds * (SEEDS_PER_PIXEL * path_bytes(s.max_depth) + lane_bytes(s))) + rows
+        parts["chain states"] = int(_chains(n_pixels, s) * CHAIN_PATHS * path_bytes(s.max_depth))
+        parts["E1 chunk"] = e1 * E1_SAMPLE_BYTES
+        parts["lightcuts"] = gather * s.max_cut_size * CUT_ENTRY_BYTES
+    return parts
+
+
+def plan(n_pixels: int, n_triangles: int, settings: RenderSettings) -> MemoryPlan:
+    """Batch sizes that fit ``settings.memory_budget_mb``; raises :class:`MemoryBudgetError`.
+
+    Args:
+        n_pixels: pixels of the rendered window; n_triangles: triangles of the scene.
+    The largest batches are the ones the settings ask for (``batch_rays``; 2^18 E1 samples;
+    2048 shading points); all batches shrink by the same factor (down to the minimums)
+    until the estimate fits.
+    """
+    s = settings
+    per = s.batch_rays if s.integrator == "PATH" else s.batch_rays // 4
+    largest = (max(MIN_BATCH_PIXELS, min(n_pixels, per)), max(MIN_SEED_PIXELS, min(n_pixels, per)),
+               MAX_E1_CHUNK, MAX_GATHER_BATCH)
+    smallest = (min(MIN_BATCH_PIXELS, largest[0]), min(MIN_SEED_PIXELS, largest[1]), MIN_E1_CHUNK,
+                MIN_GATHER_BATCH)
+    fixed = fixed_parts(n_pixels, n_triangles, s)
+    budget = s.memory_budget_mb * MIB
+
+    def make(scale: float) -> MemoryPlan:
+        sizes = [max(lo, int(hi * scale)) for lo, hi in zip(smallest, largest)]
+        phases = phase_parts(n_pixels, s, *sizes)
+        peak = max(phases, key=phases.get)
+        return MemoryPlan(*sizes, parts={**fixed, f"peak phase ({peak})": phases[peak]},
+                          phases=phases, budget=budget)
+
+    best = make(1.0)
+    if budget <= 0 or best.total <= budget:
+        return best
+    scale = 1.0
+    while scale > 1e-4:
+        scale *= 0.5
+        candidate = make(scale)
+        if candidate.total <= budget:
+            return candidate
+    least = make(0.0)
+    if least.total <= budget:
+        return least
+    raise MemoryBudgetError(
+        f"Render needs about {least.describe()} of memory even with the smallest batches, more "
+        f"than the memory budget of {s.memory_budget_mb} MiB: lower the resolution (or render a "
+        f"border), reduce chains per pixel or max cut size, or raise the memory budget (0 = no limit)")
+
+
+def plan_for(desc, settings: RenderSettings) -> MemoryPlan:
+    """:func:`plan` for a (validated) :class:`~ercuts_core.description.SceneDescription`."""
+    from .camera import render_window
+    return plan(render_window(desc.camera).n_pixels, desc.mesh.n_triangles, settings)

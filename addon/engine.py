@@ -122,7 +122,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
                 settings=settings.to_dict(), warnings=warnings, cancelled=result.cancelled,
                 export_seconds=exported.seconds, total_seconds=elapsed,
                 summary=result.summary(), window=tuple(result.window),
-                export_stats=dict(exported.stats))
+                export_stats=dict(exported.stats), stats=dict(result.stats))
             if warnings:
                 unique = list(dict.fromkeys(warnings))
                 for w in unique:

@@ -102,6 +102,7 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
     parts = dict(positions=[], triangles=[], normals=[], smooth=[], material_ids=[], object_ids=[])
     n_vertices = 0
     n_instances = 0
+    skipped = dict(empty_meshes=0, degenerate_transforms=0)   # silent, counted (policy §2.6)
     for count, inst in enumerate(depsgraph.object_instances):
         if should_stop is not None and count % 1000 == 999 and should_stop():
             raise ExportCancelled()
@@ -124,9 +125,11 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
                 ob.to_mesh_clear()
             local_cache[key] = local
         if local is None or local.n_triangles == 0:
+            skipped["empty_meshes"] += 1
             continue
         placed = transform_mesh(local, np.array(inst.matrix_world, np.float64))  # copy now
         if placed is None:
+            skipped["degenerate_transforms"] += 1
             continue
         slot_rows = materials.slot_table(ob)
         names.append(_instance_name(inst))
@@ -180,5 +183,5 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         seconds=time.monotonic() - t0,
         stats=dict(triangles=mesh_table.n_triangles, instances=n_instances,
                    meshes=sum(v is not None for v in local_cache.values()),
-                   lights=len(points) + len(suns) + len(areas)),
+                   lights=len(points) + len(suns) + len(areas), **skipped),
     )

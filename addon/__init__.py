@@ -24,9 +24,9 @@ from . import compat  # noqa: E402
 
 compat.preload_embreex()  # before anything imports the core (see compat.preload_embreex)
 
-from . import engine, properties, ui  # noqa: E402
+from . import denoise, engine, presets, properties, ui  # noqa: E402
 
-_modules = (properties, engine, ui)
+_modules = (properties, engine, presets, denoise, ui)
 
 
 def register():

@@ -62,6 +62,53 @@ def set_single_layer_exr(image_settings) -> None:
     image_settings.file_format = "OPEN_EXR"
 
 
+# --------------------------------------------------------------------------- compositor
+
+#: 5.0 composites through a node group (``scene.compositing_node_group``, output = Group
+#: Output); 3.x through ``scene.node_tree`` with ``use_nodes`` and a Composite node.
+COMPOSITOR_NODE_GROUP = VERSION >= (5, 0, 0)
+
+
+def compositor_tree(scene, create: bool = True):
+    """The scene's compositor node tree (made and enabled when ``create``), or None."""
+    if COMPOSITOR_NODE_GROUP:
+        tree = scene.compositing_node_group
+        if tree is None and create:
+            tree = bpy.data.node_groups.new("Compositor", "CompositorNodeTree")
+            scene.compositing_node_group = tree
+        return tree
+    if create and not scene.use_nodes:
+        scene.use_nodes = True
+    return scene.node_tree
+
+
+def compositor_output_socket(tree):
+    """The input socket whose image becomes the composite (made when missing)."""
+    if COMPOSITOR_NODE_GROUP:
+        if not any(item.item_type == "SOCKET" and item.in_out == "OUTPUT"
+                   for item in tree.interface.items_tree):
+            tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+        node = next((n for n in tree.nodes if n.bl_idname == "NodeGroupOutput"), None)
+        node = node or tree.nodes.new("NodeGroupOutput")
+    else:
+        node = next((n for n in tree.nodes if n.bl_idname == "CompositorNodeComposite"), None)
+        node = node or tree.nodes.new("CompositorNodeComposite")
+    return node.inputs[0]
+
+
+def oidn_available() -> bool:
+    """True when this Blender was built with OpenImageDenoise (the Denoise node works).
+
+    ``bpy.app.build_options`` does not say; Cycles' ``_cycles.with_openimagedenoise``
+    does (False in Debian's 3.4.1 build, True in bpy 5.0.1).
+    """
+    try:
+        import _cycles
+    except ImportError:
+        return False
+    return bool(getattr(_cycles, "with_openimagedenoise", False))
+
+
 # --------------------------------------------------------------------------- meshes
 
 def corner_normals(mesh):

@@ -8,9 +8,17 @@ Failures are reported with ``self.report({'ERROR'}, ...)``, which aborts the ren
 and makes ``bpy.ops.render.render`` raise and a batch render exit non-zero (an
 uncaught exception would only be printed, shared docs ``blender.md`` §0.6); the
 traceback goes to the console. Warnings are reported once per render.
+
+While the core runs, its ``preview`` callback (when the core has one) shows the image
+so far (``framebuffer.show_preview``); in background mode one line is printed per
+phase. The final image goes into Combined and the view layer's enabled passes
+(:mod:`.passes`, declared in ``update_render_passes``); optionally a JSON statistics
+file is written next to the frame (:mod:`.sidecar`). Preview thumbnails
+(``is_preview``) use :func:`preview_settings`.
 """
 from __future__ import annotations
 
+import inspect
 import time
 import traceback
 
@@ -19,8 +27,38 @@ import bpy
 #: Details of the last final render, for tests and debugging (plain Python data only).
 last_render: dict = {}
 
-#: Settings used for material/world preview thumbnails (fast, low noise is not needed).
-PREVIEW_LIMITS = dict(samples=8, max_depth=4, time_limit=5.0)
+#: Material/world/light preview thumbnails: unidirectional path tracing (no chains,
+#: VPLs or light tree to build), few samples, shallow paths, at most 2 s.
+PREVIEW_LIMITS = dict(integrator="PATH", samples=8, max_depth=4, time_limit=2.0)
+
+#: Phase names that start the core's progress messages (``ercuts_core.render``).
+PHASES = ("BDPT", "ER chains", "VPLs", "Light tree", "Lightcuts", "PATH")
+
+
+def preview_settings(settings):
+    """The cheap settings used for preview thumbnails (``is_preview``)."""
+    limit = settings.time_limit
+    return settings.replace(
+        integrator=PREVIEW_LIMITS["integrator"],
+        samples=min(settings.samples, PREVIEW_LIMITS["samples"]),
+        max_depth=min(settings.max_depth, PREVIEW_LIMITS["max_depth"]),
+        time_limit=min(limit, PREVIEW_LIMITS["time_limit"]) if limit > 0 else PREVIEW_LIMITS["time_limit"])
+
+
+def phase_of(message: str) -> str:
+    """The phase a core progress message names (its known prefix, else its first field)."""
+    for phase in PHASES:
+        if message.startswith(phase):
+            return phase
+    return message.split("|")[0].strip().split(" ")[0] if message else ""
+
+
+def _accepts_preview(render_fn) -> bool:
+    """True when the core's ``render`` takes the ``preview`` callback (api.md)."""
+    try:
+        return "preview" in inspect.signature(render_fn).parameters
+    except (TypeError, ValueError):
+        return False
 
 
 def _format_time(seconds: float) -> str:
@@ -39,6 +77,8 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         super().__init__(*args, **kwargs)  # required from Blender 4.4 on
         self._start = time.monotonic()
         self._stats_prefix = ""
+        self._layer_name = ""
+        self._phase = None
 
     # ------------------------------------------------------------------ entry point
     def render(self, depsgraph):
@@ -70,25 +110,41 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
                     "must be importable by Blender's Python")
         return f"{type(exc).__name__}: {exc} (see the console for details)"
 
+    # ------------------------------------------------------------------ passes
+    def update_render_passes(self, scene=None, renderlayer=None):
+        """Declare our passes so the compositor's Render Layers node shows them."""
+        from . import passes
+
+        passes.register_passes(self, scene, renderlayer)
+
     # ------------------------------------------------------------------ the render
+    def _settings(self, scene):
+        """Core settings for this render: animated seed, preview thumbnail limits."""
+        ercuts = scene.ercuts
+        settings = ercuts.to_core(seed=ercuts.seed_for_frame(scene.frame_current))
+        return preview_settings(settings) if self.is_preview else settings
+
     def _render(self, depsgraph):
         from . import compat
 
         compat.preload_embreex()
         import ercuts_core
 
-        from . import framebuffer
+        from . import framebuffer, passes
         from .export import ExportCancelled, export_scene
 
         scene = depsgraph.scene
-        layer_name = depsgraph.view_layer.name
-        settings = scene.ercuts.to_core()
-        if self.is_preview:
-            settings = settings.replace(
-                samples=min(settings.samples, PREVIEW_LIMITS["samples"]),
-                max_depth=min(settings.max_depth, PREVIEW_LIMITS["max_depth"]),
-                time_limit=PREVIEW_LIMITS["time_limit"])
+        view_layer = depsgraph.view_layer
+        layer_name = view_layer.name
+        if not view_layer.use:  # Blender skips disabled layers itself; never render one
+            return
+        settings = self._settings(scene)
+        enabled = [] if self.is_preview else passes.enabled_passes(scene, view_layer)
+        for p in enabled:  # before begin_result (a registered pass is not added twice)
+            self.add_pass(p.name, p.channels, p.chan_id, layer=layer_name)
+        self._layer_name = layer_name
         self._stats_prefix = f"{layer_name} | " if len(scene.view_layers) > 1 else ""
+        self._phase = None
         self.update_stats("Ercuts", f"{self._stats_prefix}Exporting scene")
 
         try:
@@ -105,37 +161,99 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         if settings.time_limit > 0:
             remaining = settings.time_limit - (time.monotonic() - self._start)
             settings = settings.replace(time_limit=max(remaining, 1e-3))
-        result = ercuts_core.render(desc, settings, progress=self._progress)
+        kwargs = {}
+        if _accepts_preview(ercuts_core.render):
+            kwargs["preview"] = self._preview_callback(scene.render, desc, layer_name)
+        result = ercuts_core.render(desc, settings, progress=self._progress, **kwargs)
 
-        framebuffer.write_image(self, scene.render, result.image, result.window, layer_name)
+        images, missing = passes.pass_images(result, enabled)
+        framebuffer.write_image(self, scene.render, images, result.window, layer_name)
         self.update_progress(1.0)
+        elapsed = time.monotonic() - self._start
+        self.update_stats("Ercuts", f"{self._stats_prefix}{result.summary()} | "
+                                    f"{_format_time(elapsed)}")
+        if self.is_preview:
+            return
+        warnings = self._warnings(scene, exported, result, missing, settings)
+        last_render.clear()
+        last_render.update(
+            settings=settings.to_dict(), warnings=warnings, cancelled=result.cancelled,
+            export_seconds=exported.seconds, total_seconds=elapsed,
+            summary=result.summary(), window=tuple(result.window),
+            export_stats=dict(exported.stats), stats=dict(result.stats), passes=list(images),
+            missing_passes=[p.name for p in missing], progressive=bool(kwargs),
+            layer=layer_name)
+        if scene.ercuts.write_sidecar:
+            last_render["sidecar"] = self._write_sidecar(scene, layer_name, result, settings,
+                                                         exported, warnings, elapsed)
+        if warnings:
+            unique = list(dict.fromkeys(warnings))
+            for w in unique:
+                print(f"Ercuts warning: {w}")
+            self.report({"WARNING"}, "Ercuts: " + "; ".join(unique))
+        if result.cancelled:
+            print(f"Ercuts: render stopped early: {result.summary()}")
+
+    @staticmethod
+    def _warnings(scene, exported, result, missing, settings) -> list[str]:
+        """Everything worth one warning line after a render."""
+        from . import compat, denoise, passes
+
         warnings = list(exported.warnings)
         warnings += [i.message for i in result.issues if i.severity == "warning"]
         if not exported.has_emitters and not any(i.code == "no_lights" for i in result.issues):
             warnings.append("scene has no lights: the image is black")
-        elapsed = time.monotonic() - self._start
-        self.update_stats("Ercuts", f"{self._stats_prefix}{result.summary()} | "
-                                    f"{_format_time(elapsed)}")
-        if not self.is_preview:
-            last_render.clear()
-            last_render.update(
-                settings=settings.to_dict(), warnings=warnings, cancelled=result.cancelled,
-                export_seconds=exported.seconds, total_seconds=elapsed,
-                summary=result.summary(), window=tuple(result.window),
-                export_stats=dict(exported.stats), stats=dict(result.stats))
-            if warnings:
-                unique = list(dict.fromkeys(warnings))
-                for w in unique:
-                    print(f"Ercuts warning: {w}")
-                self.report({"WARNING"}, "Ercuts: " + "; ".join(unique))
-            if result.cancelled:
-                print(f"Ercuts: render stopped early: {result.summary()}")
+        missing_warning = passes.missing_warning(missing, settings.integrator)
+        if missing_warning:
+            warnings.append(missing_warning)
+        if scene.ercuts.use_denoising and not compat.oidn_available():
+            warnings.append(denoise.NO_OIDN_WARNING)
+        return warnings
+
+    def _write_sidecar(self, scene, layer_name, result, settings, exported, warnings, elapsed):
+        """Add this layer's statistics to the frame's JSON sidecar; its path (None on failure)."""
+        from . import sidecar
+
+        enabled = [vl.name for vl in scene.view_layers if vl.use]
+        report = sidecar.layer_report(result, settings, dict(
+            view_layer=layer_name, export_seconds=exported.seconds, total_seconds=elapsed,
+            export_stats=dict(exported.stats), warnings=list(dict.fromkeys(warnings))))
+        try:
+            return sidecar.add_layer(scene, scene.frame_current, layer_name, report,
+                                     first_layer=not enabled or enabled[0] == layer_name)
+        except OSError as exc:  # the image still renders; say why the file is missing
+            warnings.append(f"statistics file not written: {exc}")
+            return None
+
+    def _preview_callback(self, render, desc, layer_name):
+        """The core's ``preview(image)``: show the image so far in the render window."""
+        from ercuts_core.camera import render_window
+
+        from . import framebuffer
+
+        w = render_window(desc.camera)
+        window = (w.x0, w.y0, w.width, w.height)
+
+        def preview(image):
+            framebuffer.show_preview(self, render, image, window, layer_name)
+
+        return preview
 
     def _progress(self, fraction: float, message: str) -> bool:
-        """Core progress callback: progress bar, stats line, cancel polling."""
-        self.update_progress(min(max(float(fraction), 0.0), 1.0))
+        """Core progress callback: progress bar, stats line, cancel polling.
+
+        In background mode (``blender -b``) one line is printed per phase change.
+        """
+        fraction = min(max(float(fraction), 0.0), 1.0)
+        self.update_progress(fraction)
         elapsed = time.monotonic() - self._start
         self.update_stats("Ercuts", f"{self._stats_prefix}{message} | {_format_time(elapsed)}")
+        phase = phase_of(message)
+        if phase != self._phase:
+            self._phase = phase
+            if bpy.app.background:
+                print(f"Ercuts: {self._layer_name} | {phase} | "
+                      f"{fraction:4.0%} | {_format_time(elapsed)}", flush=True)
         return not self._should_stop()
 
     def _should_stop(self) -> bool:

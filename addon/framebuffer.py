@@ -12,6 +12,8 @@ Conventions (shared docs ``blender.md`` §0.2–0.3, verified on 3.4.1 and 5.0.1
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from . import compat
@@ -52,27 +54,65 @@ def place(image: np.ndarray, window, full_height: int,
     return out
 
 
-def write_image(engine, render, image: np.ndarray, window, layer_name: str,
+def write_image(engine, render, image, window, layer_name: str,
                 pass_name: str = "Combined") -> None:
     """Write ``image`` (core convention) into a fresh RenderResult and close it.
 
+    ``image`` is one (h, w, C) array for ``pass_name``, or a mapping pass name → array
+    to fill several passes of the same result (passes the result lacks are skipped).
     ``engine.begin_result`` is clipped by Blender to the border window; the pixels are
     placed at their full-frame position inside it.
+    """
+    images = image if isinstance(image, Mapping) else {pass_name: image}
+    width, height = engine.resolution_x, engine.resolution_y
+    result = engine.begin_result(0, 0, width, height, layer=layer_name)
+    try:
+        _fill(result, render, images, window, (width, height))
+    finally:
+        engine.end_result(result)
+
+
+def show_preview(engine, render, image, window, layer_name: str) -> None:
+    """Progressive display: write ``image`` into Combined and ``update_result`` it.
+
+    Used while the core renders (its ``preview`` callback); the final
+    :func:`write_image` overwrites it. Closing the result merges it into the frame, so
+    a cancelled render keeps at least this image.
     """
     width, height = engine.resolution_x, engine.resolution_y
     result = engine.begin_result(0, 0, width, height, layer=layer_name)
     try:
-        target_size = (result.resolution_x, result.resolution_y)
-        origin = blender_window(render, width, height)
-        layer = result.layers[0]
-        render_pass = layer.passes.get(pass_name) if hasattr(layer.passes, "get") else None
+        _fill(result, render, {"Combined": image}, window, (width, height))
+        engine.update_result(result)
+    finally:
+        engine.end_result(result)
+
+
+def _find_pass(layer, name: str):
+    for render_pass in layer.passes:
+        if render_pass.name == name:
+            return render_pass
+    return None
+
+
+def _fill(result, render, images: Mapping, window, full_size) -> None:
+    """Place every image of ``images`` (name → (h, w, C) top row first) into ``result``."""
+    width, height = full_size
+    target_size = (result.resolution_x, result.resolution_y)
+    origin = blender_window(render, width, height)
+    layer = result.layers[0]
+    for name, data in images.items():
+        render_pass = _find_pass(layer, name)
         if render_pass is None:
+            if name != "Combined":
+                continue
             render_pass = layer.passes[0]
-        pixels = place(np.asarray(image, np.float32), window, height, origin, target_size)
+        data = np.asarray(data, np.float32)
+        if data.ndim == 2:
+            data = data[..., None]
+        pixels = place(data, window, height, origin, target_size)
         channels = render_pass.channels
         if pixels.shape[2] < channels:  # pad RGB → RGBA with alpha 1
             pad = np.ones(pixels.shape[:2] + (channels - pixels.shape[2],), np.float32)
             pixels = np.concatenate([pixels, pad], axis=2)
         compat.rect_set(render_pass, pixels[..., :channels].reshape(-1, channels))
-    finally:
-        engine.end_result(result)

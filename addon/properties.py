@@ -13,6 +13,8 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
 
+from . import passes
+
 # Enum numbers are what .blend files store: keep them stable when items are added.
 INTEGRATOR_ITEMS = (
     ("ERCUTS", "ERCuts", "Energy-redistribution chains seeded by BDPT, deposited as virtual point "
@@ -55,6 +57,21 @@ def _get_film_transparent(self):
 
 def _set_film_transparent(self, value):
     self.id_data.render.film_transparent = bool(value)
+
+
+def _get_max_error_percent(self):
+    return float(self.max_error) * 100.0
+
+
+def _set_max_error_percent(self, value):
+    self.max_error = float(value) / 100.0
+
+
+def _update_passes(self, context):
+    """Refresh the compositor's Render Layers sockets after a pass toggle changed."""
+    scene = self.id_data
+    for view_layer in getattr(scene, "view_layers", ()):
+        view_layer.update_render_passes()
 
 
 class ErcutsRenderSettings(bpy.types.PropertyGroup):
@@ -187,6 +204,39 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         default=_default("memory_budget_mb", 4096), min=0, soft_max=65536,
     )
 
+    # ---- add-on-only settings (not in RenderSettings; listed in ADDON_ONLY_NAMES)
+    max_error_percent: FloatProperty(
+        name="Max Error",
+        description=("Lightcut error threshold in percent of the pixel estimate (2 % = Weber's "
+                     "law); the same setting as Max Error, shown as a percentage"),
+        min=0.0, max=100.0, precision=1, subtype="PERCENTAGE",
+        get=_get_max_error_percent, set=_set_max_error_percent,
+    )
+    use_animated_seed: BoolProperty(
+        name="Animated Seed",
+        description="Add the frame number to the seed, so the noise changes from frame to frame",
+        default=False,
+    )
+    use_denoising: BoolProperty(
+        name="Denoising",
+        description=("Write the denoiser's guides (Normal, Albedo) and keep the noisy image as "
+                     "its own pass; the compositor's Denoise node (OpenImageDenoise) does the "
+                     "denoising (see Set Up Denoising)"),
+        default=False, update=_update_passes,
+    )
+    write_sidecar: BoolProperty(
+        name="Statistics File",
+        description=("Write a JSON file with the settings, seed, per-phase timings and VPL/cut "
+                     "statistics next to each rendered frame (<output name>.ercuts.json)"),
+        default=False,
+    )
+
+    def seed_for_frame(self, frame: int) -> int:
+        """The core's seed for ``frame``: ``seed``, or ``seed + frame`` with Animated Seed."""
+        if not self.use_animated_seed:
+            return int(self.seed)
+        return (int(self.seed) + int(frame)) % (1 << 31)
+
     def to_core(self, **overrides):
         """The equivalent ``ercuts_core.settings.RenderSettings`` (``overrides`` win)."""
         from ercuts_core.settings import RenderSettings
@@ -218,7 +268,34 @@ PROPERTY_NAMES = ("integrator", "samples", "seed", "max_depth", "rr_depth", "tim
                   "multichain_perturbation", "bidirectional_mutation", "max_cut_size", "clamp",
                   "gather", "seeding", "shading_samples", "e1_samples", "memory_budget_mb")
 
-classes = (ErcutsRenderSettings,)
+#: Properties of ``scene.ercuts`` that the add-on adds on top of the mirror (not core settings).
+ADDON_ONLY_NAMES = ("max_error_percent", "use_animated_seed", "use_denoising", "write_sidecar")
+
+
+def _pass_toggle(pass_def) -> BoolProperty:
+    return BoolProperty(name=pass_def.name, description=pass_def.description, default=False,
+                        update=_update_passes)
+
+
+class ErcutsViewLayerSettings(bpy.types.PropertyGroup):
+    """Per-view-layer Ercuts pass toggles (``view_layer.ercuts``; see :mod:`.passes`).
+
+    Depth and Normal use Blender's own ``use_pass_z`` / ``use_pass_normal``.
+    """
+
+    __annotations__ = {p.toggle: _pass_toggle(p) for p in passes.OWN_PASSES}
+
+    @classmethod
+    def register(cls):
+        bpy.types.ViewLayer.ercuts = PointerProperty(
+            type=cls, name="Ercuts Passes", description="Ercuts render passes of this view layer")
+
+    @classmethod
+    def unregister(cls):
+        del bpy.types.ViewLayer.ercuts
+
+
+classes = (ErcutsRenderSettings, ErcutsViewLayerSettings)
 
 
 register, unregister = bpy.utils.register_classes_factory(classes)

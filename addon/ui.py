@@ -22,8 +22,9 @@ _EXCLUDE_PANELS = {
     "DATA_PT_spot",
     "DATA_PT_falloff_curve",
     "NODE_DATA_PT_light",
-    "VIEWLAYER_PT_layer_passes",
+    "VIEWLAYER_PT_layer_passes",  # replaced by ERCUTS_VIEWLAYER_PT_passes
     "VIEWLAYER_PT_filter",
+    "VIEWLAYER_PT_override",  # replaced by ERCUTS_VIEWLAYER_PT_override (3.4 has none)
 }
 #: EEVEE-only panels that are also right for Ercuts (material slots and previews).
 _EXTRA_PANELS = {
@@ -70,8 +71,16 @@ class ErcutsPanel:
 # --------------------------------------------------------------------------- render tab
 
 class ERCUTS_RENDER_PT_sampling(ErcutsPanel, bpy.types.Panel):
+    """Integrator, samples, seed; the header holds the Preview/Final preset menu."""
+
     bl_label = "Sampling"
     bl_context = "render"
+
+    def draw_header_preset(self, context):
+        from . import presets
+
+        self.layout.menu(presets.ERCUTS_MT_sampling_presets.__name__,
+                         text=presets.header_label(context.scene.ercuts))
 
     def draw(self, context):
         layout, settings = _settings_layout(self.layout, context)
@@ -79,7 +88,7 @@ class ERCUTS_RENDER_PT_sampling(ErcutsPanel, bpy.types.Panel):
         col = layout.column(align=True)
         col.prop(settings, "samples")
         col.prop(settings, "seed")
-        layout.prop(settings, "time_limit")
+        col.prop(settings, "use_animated_seed")
 
 
 class ERCUTS_RENDER_PT_light_paths(ErcutsPanel, bpy.types.Panel):
@@ -93,20 +102,34 @@ class ERCUTS_RENDER_PT_light_paths(ErcutsPanel, bpy.types.Panel):
         col.prop(settings, "rr_depth")
 
 
-class ERCUTS_RENDER_PT_chains(ErcutsPanel, bpy.types.Panel):
-    """Energy-redistribution chains (used by the ERCUTS integrator only)."""
+class ERCUTS_RENDER_PT_ercuts(ErcutsPanel, bpy.types.Panel):
+    """The paper's parameters: lightcut error, chains, cut size, VPL clamp (ERCUTS only)."""
 
-    bl_label = "Energy Redistribution"
+    bl_label = "Ercuts Algorithm"
     bl_context = "render"
-    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         layout, settings = _settings_layout(self.layout, context)
         layout.active = settings.integrator == "ERCUTS"
-        layout.prop(settings, "seeding")
+        col = layout.column(align=True)
+        col.prop(settings, "max_error_percent")
+        col.prop(settings, "max_cut_size")
         col = layout.column(align=True)
         col.prop(settings, "chains_per_pixel")
         col.prop(settings, "chain_length")
+        layout.prop(settings, "clamp")
+
+
+class ERCUTS_RENDER_PT_mutations(ErcutsPanel, bpy.types.Panel):
+    """Which Metropolis mutations the energy-redistribution chains use."""
+
+    bl_label = "Mutations"
+    bl_context = "render"
+    bl_parent_id = "ERCUTS_RENDER_PT_ercuts"
+
+    def draw(self, context):
+        layout, settings = _settings_layout(self.layout, context)
+        layout.active = settings.integrator == "ERCUTS"
         col = layout.column(heading="Mutations", align=True)
         col.prop(settings, "lens_perturbation", text="Lens")
         col.prop(settings, "caustic_perturbation", text="Caustic")
@@ -114,21 +137,19 @@ class ERCUTS_RENDER_PT_chains(ErcutsPanel, bpy.types.Panel):
         col.prop(settings, "bidirectional_mutation", text="Bidirectional")
 
 
-class ERCUTS_RENDER_PT_lightcuts(ErcutsPanel, bpy.types.Panel):
-    """Virtual point lights and their lightcut gather (ERCUTS integrator only)."""
+class ERCUTS_RENDER_PT_ercuts_advanced(ErcutsPanel, bpy.types.Panel):
+    """Seeding, gather and normalisation details (ERCUTS only)."""
 
-    bl_label = "Lightcuts"
+    bl_label = "Advanced"
     bl_context = "render"
+    bl_parent_id = "ERCUTS_RENDER_PT_ercuts"
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         layout, settings = _settings_layout(self.layout, context)
         layout.active = settings.integrator == "ERCUTS"
+        layout.prop(settings, "seeding")
         layout.prop(settings, "gather")
-        col = layout.column(align=True)
-        col.prop(settings, "max_error")
-        col.prop(settings, "max_cut_size")
-        col.prop(settings, "clamp")
         col = layout.column(align=True)
         col.prop(settings, "shading_samples")
         col.prop(settings, "e1_samples")
@@ -140,10 +161,25 @@ class ERCUTS_RENDER_PT_film(ErcutsPanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        layout.prop(context.scene.ercuts, "film_transparent")
+        layout, settings = _settings_layout(self.layout, context)
+        layout.prop(settings, "film_transparent")
+
+
+class ERCUTS_RENDER_PT_denoising(ErcutsPanel, bpy.types.Panel):
+    """OpenImageDenoise through the compositor (:mod:`.denoise`)."""
+
+    bl_label = "Denoising"
+    bl_context = "render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        from . import denoise
+
+        layout, settings = _settings_layout(self.layout, context)
+        layout.prop(settings, "use_denoising")
+        layout.operator(denoise.ERCUTS_OT_setup_denoising.bl_idname, icon="NODETREE")
+        if not compat.oidn_available():
+            layout.label(text="No OpenImageDenoise in this Blender", icon="ERROR")
 
 
 class ERCUTS_RENDER_PT_performance(ErcutsPanel, bpy.types.Panel):
@@ -155,6 +191,67 @@ class ERCUTS_RENDER_PT_performance(ErcutsPanel, bpy.types.Panel):
         layout, settings = _settings_layout(self.layout, context)
         layout.prop(settings, "threads")
         layout.prop(settings, "batch_rays")
+        layout.prop(settings, "time_limit")
+        if "memory_budget_mb" in settings.bl_rna.properties:
+            layout.prop(settings, "memory_budget_mb")
+
+
+# --------------------------------------------------------------------------- output / view layer
+
+class ERCUTS_OUTPUT_PT_statistics(ErcutsPanel, bpy.types.Panel):
+    """The JSON statistics file written next to each frame (:mod:`.sidecar`)."""
+
+    bl_label = "Ercuts Statistics"
+    bl_context = "output"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout, settings = _settings_layout(self.layout, context)
+        layout.prop(settings, "write_sidecar")
+
+
+class ERCUTS_VIEWLAYER_PT_passes(ErcutsPanel, bpy.types.Panel):
+    """Pass toggles of the active view layer (:mod:`.passes`)."""
+
+    bl_label = "Passes"
+    bl_context = "view_layer"
+
+    @classmethod
+    def poll(cls, context):
+        return getattr(context, "view_layer", None) is not None and super().poll(context)
+
+    def draw(self, context):
+        from . import passes
+
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        view_layer = context.view_layer
+        col = layout.column(heading="Include", align=True)
+        for p in passes.PASSES:
+            owner = view_layer if p.blender_toggle else view_layer.ercuts
+            col.prop(owner, p.toggle, text=p.name)
+
+
+class ERCUTS_VIEWLAYER_PT_override(ErcutsPanel, bpy.types.Panel):
+    """Material (and on 5.0 world) override of the view layer, which the exporter honours."""
+
+    bl_label = "Override"
+    bl_context = "view_layer"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        return getattr(context, "view_layer", None) is not None and super().poll(context)
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        view_layer = context.view_layer
+        layout.prop(view_layer, "material_override")
+        if "world_override" in view_layer.bl_rna.properties:
+            layout.prop(view_layer, "world_override")
 
 
 # --------------------------------------------------------------------------- material / world
@@ -260,10 +357,15 @@ class ERCUTS_LIGHT_PT_light(ErcutsPanel, bpy.types.Panel):
 classes = (
     ERCUTS_RENDER_PT_sampling,
     ERCUTS_RENDER_PT_light_paths,
-    ERCUTS_RENDER_PT_chains,
-    ERCUTS_RENDER_PT_lightcuts,
+    ERCUTS_RENDER_PT_ercuts,
+    ERCUTS_RENDER_PT_mutations,
+    ERCUTS_RENDER_PT_ercuts_advanced,
     ERCUTS_RENDER_PT_film,
+    ERCUTS_RENDER_PT_denoising,
     ERCUTS_RENDER_PT_performance,
+    ERCUTS_OUTPUT_PT_statistics,
+    ERCUTS_VIEWLAYER_PT_passes,
+    ERCUTS_VIEWLAYER_PT_override,
     ERCUTS_MATERIAL_PT_surface,
     ERCUTS_WORLD_PT_surface,
     ERCUTS_LIGHT_PT_light,

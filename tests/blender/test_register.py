@@ -54,7 +54,7 @@ def test_properties_mirror_render_settings():
     names = [f.name for f in dataclasses.fields(RenderSettings)]
     assert list(properties.PROPERTY_NAMES) == names
     own = {p.identifier for p in rna} - {"rna_type", "name"}
-    assert own == set(names)
+    assert own == set(names) | set(properties.ADDON_ONLY_NAMES)
     defaults = RenderSettings()
     assert properties._CORE_DEFAULTS == defaults.to_dict()  # defaults come from the core
     for name in names:
@@ -97,7 +97,7 @@ def test_panels_poll_for_engine():
     w = bpy.data.worlds.new("W")
     li = bpy.data.lights.new("L", "AREA")
     ctx = lambda engine: SimpleNamespace(engine=engine, scene=s, material=mat, world=w,  # noqa: E731
-                                         light=li)
+                                         light=li, view_layer=s.view_layers[0])
     for cls in ui.classes:
         assert cls.poll(ctx("ERCUTS")), cls.__name__
         assert not cls.poll(ctx("CYCLES")), cls.__name__
@@ -147,6 +147,12 @@ class _FakeLayout:
     def label(self, **kwargs):
         self.log.append("label")
 
+    def operator(self, idname, **kwargs):
+        module, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, module), name), idname
+        self.log.append(idname)
+        return SimpleNamespace()
+
     def separator(self, **kwargs):
         pass
 
@@ -166,7 +172,8 @@ def test_panels_draw(light_type):
     w = bpy.data.worlds.new("W")
     compat.enable_nodes(w)
     li = bpy.data.lights.new("L", light_type)
-    ctx = SimpleNamespace(engine="ERCUTS", scene=s, material=mat, world=w, light=li)
+    ctx = SimpleNamespace(engine="ERCUTS", scene=s, material=mat, world=w, light=li,
+                          view_layer=s.view_layers[0])
     for cls in ui.classes:
         log = []
         cls.draw(SimpleNamespace(layout=_FakeLayout(log)), ctx)  # draw() only uses self.layout

@@ -1,0 +1,101 @@
+"""JSON statistics file written next to a rendered frame (``scene.ercuts.write_sidecar``).
+
+For the frame whose image goes to ``scene.render.frame_path(frame=f)`` (e.g.
+``out/shot_0007.exr``) the sidecar is ``out/shot_0007.ercuts.json``:
+
+    {"format": "ercuts-sidecar", "version": 1, "frame": 7, "image": "<frame path>",
+     "blender": "5.0.1", "layers": {"<view layer>": <layer report>, ...}}
+
+A layer report is the core's ``RenderResult.report_dict(settings)`` (settings, seed,
+per-phase timings, VPL and cut statistics, issues, cancelled, window) plus the
+add-on's export time, total time and warnings. Every view layer of the frame adds its
+report, and the file is rewritten atomically (temporary file + ``os.replace``) each
+time, so a reader never sees a half-written file.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+
+import bpy
+
+#: Extensions stripped from the frame path before adding ``.ercuts.json``.
+IMAGE_EXTENSIONS = {".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".hdr", ".bmp", ".tga",
+                    ".webp", ".jp2", ".j2c", ".dpx", ".cin", ".rgb", ".sgi"}
+SUFFIX = ".ercuts.json"
+
+#: Reports of the frame being rendered, by sidecar path (one engine instance per frame,
+#: so the layers of a frame are collected here).
+_pending: dict[str, dict] = {}
+
+
+def sidecar_path(scene, frame: int) -> str:
+    """Absolute path of the sidecar of ``frame``."""
+    image = bpy.path.abspath(scene.render.frame_path(frame=frame))
+    stem, ext = os.path.splitext(image)
+    if ext.lower() not in IMAGE_EXTENSIONS:
+        stem = image
+    return stem + SUFFIX
+
+
+def layer_report(result, settings, extra: dict) -> dict:
+    """The report of one view layer: the core's ``report_dict`` (or its parts) + ``extra``."""
+    if hasattr(result, "report_dict"):
+        report = dict(result.report_dict(settings))
+    else:  # core without report_dict: the same information from the result's fields
+        report = {"settings": settings.to_dict(), "seed": settings.seed,
+                  "timings": dict(result.timings), "stats": dict(result.stats),
+                  "issues": [i.message for i in result.issues],
+                  "cancelled": bool(result.cancelled), "window": list(result.window)}
+    report.update(extra)
+    return report
+
+
+def _plain(value):
+    """JSON fallback for values json cannot encode (sets, objects): sorted list or str."""
+    if isinstance(value, (set, frozenset)):
+        return sorted(value)
+    return str(value)
+
+
+def _finite(value):
+    """``value`` with NaN/inf floats replaced by None (strict JSON has neither)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {str(k): _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if hasattr(value, "tolist"):  # numpy scalar or array
+        return _finite(value.tolist())
+    return value
+
+
+def write_atomic(path: str, data: dict) -> None:
+    """Write ``data`` as strict JSON to ``path`` atomically (directories are created)."""
+    data = _finite(data)
+    directory = os.path.dirname(path) or "."
+    os.makedirs(directory, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".ercuts-", suffix=".json.tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            json.dump(data, f, indent=1, default=_plain, allow_nan=False)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def add_layer(scene, frame: int, layer_name: str, report: dict, first_layer: bool) -> str:
+    """Add ``report`` for ``layer_name`` to the frame's sidecar and rewrite it; its path."""
+    path = sidecar_path(scene, frame)
+    if first_layer or path not in _pending:
+        _pending[path] = {"format": "ercuts-sidecar", "version": 1, "frame": int(frame),
+                          "image": bpy.path.abspath(scene.render.frame_path(frame=frame)),
+                          "blender": ".".join(str(v) for v in bpy.app.version), "layers": {}}
+    _pending[path]["layers"][layer_name] = report
+    write_atomic(path, _pending[path])
+    return path

@@ -7,7 +7,10 @@ Blender's render result (:mod:`.engine`, :mod:`.framebuffer`). Settings live in
 difference in :mod:`.compat`. Only relative imports are used inside the package, so it
 can be installed under any name; the core is imported as the top-level package
 ``ercuts_core`` (with numpy and embreex) only when a render starts, so the add-on
-registers even where those are missing and then reports it when rendering.
+registers even where those are missing and then reports it when rendering; the add-on
+preferences (:mod:`.preferences`) show which dependency is missing and how to install it.
+The packages users install are built by ``scripts/build_addon.py`` (an extension zip for
+Blender ≥ 4.2 with ``blender_manifest.toml``, and a legacy zip for 3.x).
 """
 
 bl_info = {
@@ -20,13 +23,22 @@ bl_info = {
     "category": "Render",
 }
 
-from . import compat  # noqa: E402
+from . import compat, dependencies  # noqa: E402
 
+dependencies.use_vendored_core()  # legacy zip: the core is in <package>/vendor
 compat.preload_embreex()  # before anything imports the core (see compat.preload_embreex)
 
-from . import denoise, engine, presets, properties, ui  # noqa: E402
+from . import denoise, engine, preferences, presets, properties, ui  # noqa: E402
 
-_modules = (properties, engine, presets, denoise, ui)
+#: Registered in this order, unregistered in reverse (add a module with register() here).
+_modules = (
+    preferences,
+    properties,
+    engine,
+    presets,
+    denoise,
+    ui,
+)
 
 
 def register():

@@ -233,9 +233,9 @@ def _hinged_panel(b: _Builder, hinge, width: float, height: float, thickness: fl
 def door_ajar(width: int = 160, height: int = 120) -> SceneDescription:
     """A dark room lit only through a door left ajar (benchmark: indirect light, narrow gap).
 
-    The room is x ∈ [0, 4], z ∈ [0, 4], 2.5 m high; its wall at x = 4 has a 0.9 m × 2.1 m
-    door opening (z ∈ [1.4, 2.3]). The door, hinged at z = 1.4, is opened 9° into the
-    hallway (x ∈ [4, 6]), leaving a wedge-shaped gap of about 0.14 m at its free edge. The
+    The room is x ∈ [0, 3.95], z ∈ [0, 4], 2.5 m high; its 0.1 m thick wall at x = 4 has a
+    0.9 m × 2.1 m door opening (z ∈ [1.4, 2.3]). The door, hinged at z = 1.4, is opened 9°
+    into the hallway (x ∈ [4.05, 6]), leaving a wedge-shaped gap of about 0.14 m at its free edge. The
     only light is a 1 m² emissive panel on the hallway ceiling, so everything the camera sees
     in the room is lit by light squeezed through the gap and bounced off the hallway walls.
     """
@@ -243,12 +243,13 @@ def door_ajar(width: int = 160, height: int = 120) -> SceneDescription:
     wall, floor, door, lamp = 0, 1, 2, 3
     H, x = 2.5, 4.0
     b.box((0, 0, 0), (6, H, 4), wall, b.object("Shell"), inward=True)
-    sep = b.object("DoorWall")          # the wall between room and hallway, both faces
+    sep = b.object("DoorWall")          # 0.1 m thick wall between room and hallway
     z0, z1, dh = 1.4, 2.3, 2.1
-    for (za, zb, ya, yb) in ((0, z0, 0, H), (z1, 4, 0, H), (z0, z1, dh, H)):
-        b.quad((x, ya, za), (x, ya, zb), (x, yb, zb), (x, yb, za), wall, sep)     # −x face (room)
-        b.quad((x, ya, za), (x, yb, za), (x, yb, zb), (x, ya, zb), wall, sep)     # +x face (hall)
-    _hinged_panel(b, (x, 0.0, z0), z1 - z0 - 0.01, dh - 0.01, 0.04, 9.0, door, b.object("Door"))
+    for lo, hi in (((x - 0.05, 0, 0), (x + 0.05, H, z0)), ((x - 0.05, 0, z1), (x + 0.05, H, 4)),
+                   ((x - 0.05, dh, z0), (x + 0.05, H, z1))):
+        b.box(lo, hi, wall, sep)
+    _hinged_panel(b, (x + 0.05, 0.01, z0), z1 - z0 - 0.01, dh - 0.02, 0.04, 9.0, door,
+                  b.object("Door"))
     b.quad((0.02, 0.001, 0.3), (3.0, 0.001, 0.3), (3.0, 0.001, 3.7), (0.02, 0.001, 3.7),
            floor, b.object("Rug"))
     light = b.object("HallLamp")

@@ -9,6 +9,7 @@ Nothing here touches bpy outside the calling thread, and the result is plain num
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -21,6 +22,10 @@ from .mesh import GEOMETRY_TYPES, read_mesh, transform_mesh
 from .world import world_radiance
 
 __all__ = ["ExportCancelled", "ExportError", "ExportResult", "export_scene", "render_size"]
+
+
+#: Grid [m] of the description's origin (see "near-camera coordinates" in export_scene).
+ORIGIN_GRID = 1024.0
 
 
 class ExportError(Exception):
@@ -55,6 +60,13 @@ def _instance_name(inst) -> str:
     if inst.is_instance and inst.parent is not None:
         return f"{inst.parent.name}/{name}"
     return name
+
+
+def _relative(matrix_world, origin: np.ndarray) -> np.ndarray:
+    """A copy of ``matrix_world`` (4×4 float64) translated by −``origin``."""
+    m = np.array(matrix_world, np.float64)
+    m[:3, 3] -= origin
+    return m
 
 
 def _mesh_key(ob):
@@ -94,6 +106,18 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         except CameraExportError as exc:
             raise ExportError(str(exc)) from None
 
+    # Near-camera coordinates: the description's origin moves to the multiple of
+    # ORIGIN_GRID metres nearest the camera, so scenes far from Blender's origin keep
+    # float32 precision where they are seen (1e5 m away the float32 spacing is 8 mm and
+    # the tracer's offsets grow with |p|). A pure translation, so the image does not
+    # change; scenes within 512 m of the origin are exported unshifted.
+    origin = np.zeros(3)
+    if camera is not None:
+        origin = np.round(camera.world_from_camera[:3, 3] / ORIGIN_GRID) * ORIGIN_GRID
+        shifted = camera.world_from_camera.copy()
+        shifted[:3, 3] -= origin
+        camera = dataclasses.replace(camera, world_from_camera=shifted)
+
     # ---------------------------------------------------------------- objects
     materials = MaterialCollector(override=getattr(view_layer, "material_override", None))
     lights = LightCollector()
@@ -111,7 +135,7 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
             continue
         if ob.type == "LIGHT":
             names.append(_instance_name(inst))
-            lights.add(ob.data, np.array(inst.matrix_world, np.float64), len(names) - 1, ob.name)
+            lights.add(ob.data, _relative(inst.matrix_world, origin), len(names) - 1, ob.name)
             continue
         if ob.type not in GEOMETRY_TYPES or not inst.show_self:
             continue
@@ -127,7 +151,7 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         if local is None or local.n_triangles == 0:
             skipped["empty_meshes"] += 1
             continue
-        placed = transform_mesh(local, np.array(inst.matrix_world, np.float64))  # copy now
+        placed = transform_mesh(local, _relative(inst.matrix_world, origin))  # copy now
         if placed is None:
             skipped["degenerate_transforms"] += 1
             continue
@@ -183,5 +207,6 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         seconds=time.monotonic() - t0,
         stats=dict(triangles=mesh_table.n_triangles, instances=n_instances,
                    meshes=sum(v is not None for v in local_cache.values()),
-                   lights=len(points) + len(suns) + len(areas), **skipped),
+                   lights=len(points) + len(suns) + len(areas), **skipped,
+                   origin=tuple(float(x) for x in origin)),
     )

@@ -90,7 +90,8 @@ def transform_mesh(local: LocalMesh, world_from_object: np.ndarray) -> WorldMesh
     det = float(np.linalg.det(linear))
     if not np.isfinite(det) or abs(det) < 1e-30:
         return None
-    positions = local.positions @ linear.T + offset
+    with np.errstate(invalid="ignore", over="ignore"):   # NaN/Inf vertices: dropped by validate
+        positions = local.positions @ linear.T + offset
     normals = local.normals.astype(np.float64) @ np.linalg.inv(linear)  # (M⁻ᵀ n)ᵀ = nᵀ M⁻¹
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     normals = np.where(length > 0, normals / np.where(length > 0, length, 1.0), 0.0)

@@ -195,3 +195,53 @@ def load_exr(path) -> np.ndarray:
     finally:
         bpy.data.images.remove(img)
     return px.reshape(h, w, 4)[::-1].copy()  # Blender images are bottom row first
+
+
+#: Reads every channel of an EXR (all parts) into an .npz: argv = exr path, npz path.
+_READ_EXR = """
+import sys, numpy as np, OpenEXR
+with OpenEXR.File(sys.argv[1], separate_channels=True) as exr:
+    np.savez(sys.argv[2], **{n: np.asarray(c.pixels, np.float32)
+                             for part in exr.parts for n, c in part.channels.items()})
+"""
+
+
+def read_exr_channels(path) -> dict:
+    """Channel name → (h, w) float32 (top row first) of an EXR, read with OpenEXR.
+
+    Inside a Blender binary (e.g. Debian's 3.4.1, which links its own OpenEXR 3.1) the
+    wheel's OpenEXR 3.4 crashes the process, so it is read by a separate Python there
+    (``python3`` with the inherited PYTHONPATH); with the bpy module, in-process.
+    """
+    import os
+    import shutil
+    import subprocess
+    import sys
+    import tempfile
+
+    if not bpy.app.binary_path:
+        python = sys.executable
+    else:
+        python = shutil.which("python3") or shutil.which("python")
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "channels.npz")
+        subprocess.run([python, "-c", _READ_EXR, str(path), out], check=True)
+        with np.load(out) as data:
+            return {name: data[name] for name in data.files}
+
+
+def render_multilayer(path, scene=None) -> dict:
+    """Render to a 32-bit multilayer EXR and read every channel back
+    (:func:`read_exr_channels`; 5.0 writes one EXR part per pass, 3.4 a single part)."""
+    s = scene or bpy.context.scene
+    compat.set_multilayer_exr(s.render.image_settings)
+    s.render.image_settings.color_depth = "32"
+    s.render.filepath = str(path)
+    s.render.use_file_extension = False
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    return read_exr_channels(path)
+
+
+def layer_pass(channels: dict, layer: str, name: str, chans: str) -> np.ndarray:
+    """(h, w, len(chans)) pass ``name`` of ``layer`` from :func:`render_multilayer` channels."""
+    return np.stack([channels[f"{layer}.{name}.{c}"] for c in chans], axis=2)

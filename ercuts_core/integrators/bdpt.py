@@ -705,6 +705,8 @@ class BDPTIntegrator(Integrator):
         for rec in self._pending:
             lane, s, t = rec["lane"], rec["s"], rec["t"]
             R = len(lane)
+            if R == 0:          # a strategy with no rows in this batch (seen at max_depth <= 4)
+                continue
             P = PathBatch.empty(R, K)
             rows = np.arange(R)
             # Camera vertices x0 … x_{t−1}

@@ -82,7 +82,7 @@ def report(cases: list[dict]) -> str:
             "case; 'RSS before render' is the interpreter, numpy, embree and the description.", "",
             *rows, ""]
     for c in errors:
-        text += [f"With `memory_budget_mb={c['settings']['memory_budget_mb']}` at {c['width']}×{c['height']} the "
+        text += [f"With `memory_budget_mb={c['settings'].get('memory_budget_mb', 4096)}` at {c['width']}×{c['height']} the "
                  f"render is refused before allocating ({c['wall_s']:.2f} s, peak RSS {c['peak_rss_mb']:.0f} MiB):", "",
                  f"> {c['error']}", ""]
     return "\n".join(text)

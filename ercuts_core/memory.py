@@ -29,8 +29,8 @@ MIB = 1 << 20
 FILM_CHANNELS = 7 + 16
 #: ERCUTS-only AOVs: cut_size 1, chain_deposits 1, vpl_density 1, er_caustic 3.
 ERCUTS_AOV_CHANNELS = 6
-#: Output per channel: the float32 result plus the float64 temporaries of its conversion.
-OUTPUT_BYTES_PER_CHANNEL = 4 + 8
+#: Output per channel: the float32 result.
+OUTPUT_BYTES_PER_CHANNEL = 4
 #: Bytes per triangle: description (float32 positions, int32 indices, ids), the built
 #: scene's float64 copies and normals, and embree's BVH.
 TRIANGLE_BYTES = 400
@@ -42,20 +42,25 @@ BDPT_LANE_VERTEX_BYTES = 600
 BDPT_FIXED_BYTES = 80 * MIB
 #: ERCUTS per shading point: G-buffer (positions, normals, directions, hit record) and the
 #: direct-light image with its light-sample temporaries.
-GBUFFER_POINT_BYTES = 700
+GBUFFER_POINT_BYTES = 300
 #: One path of K vertex slots (position, two normals, material) plus its raster/ids.
 PATH_SLOT_BYTES = 3 * 3 * 8 + 8
 PATH_FIXED_BYTES = 40
-#: Chain state: the current path, the proposals of one lock-step mutation round and the
-#: contribution temporaries, in path sizes.
-CHAIN_PATHS = 3.5
+#: Chain state in path sizes: the current paths, plus the copies and proposals of one
+#: mutation type's rows (a lock-step round handles one type at a time, about a quarter to
+#: a half of the chains) and the contribution temporaries.
+CHAIN_PATHS = 2.0
 #: Seed paths per pixel of a seed batch (every BDPT connection strategy may seed).
 SEEDS_PER_PIXEL = 2.0
-#: VPLs in the chains' store per chain (its initial capacity; it doubles when exceeded).
-VPLS_PER_CHAIN = 4
-#: Per VPL: chain store (position, normal, home, count, colour), the VPL set, the light
-#: tree (2 nodes per VPL: bounds, cone, intensity, representative) and its builder.
-VPL_BYTES = 96 + 110 + 2 * 160 + 200
+#: VPL slots in the chains' store per chain (its initial capacity; it doubles when
+#: exceeded) and their bytes (position, normal, home, count, colour).
+VPL_SLOTS_PER_CHAIN = 4
+VPL_SLOT_BYTES = 96
+#: VPLs per chain after merging (measured 0.3–1.3 on the S-corridor), and the bytes of
+#: each: the VPL set, the light tree (2 nodes: bounds, cone, intensity, representative)
+#: and its builder's temporaries.
+VPLS_PER_CHAIN = 1.5
+VPL_BYTES = 110 + 2 * 160 + 200
 #: Per E1 sample of a chunk: rays, hits, BSDF and camera connection.
 E1_SAMPLE_BYTES = 900
 #: Per live lightcut entry (point, node, unit radiance, bounds) and refinement temporaries.
@@ -125,21 +130,24 @@ def fixed_parts(n_pixels: int, n_triangles: int, settings: RenderSettings) -> di
     s = settings
     ercuts = s.integrator == "ERCUTS"
     channels = FILM_CHANNELS + (ERCUTS_AOV_CHANNELS if ercuts else 0)
-    # Films alive at once: the result and one pass (ERCUTS: also the rough BDPT image).
-    films = 3 if ercuts else 2
+    # Films alive at once: the result and one pass (ERCUTS: the rough BDPT image and its
+    # pass; the final film's accumulators are filled at the end, when the pass is gone).
+    films = 2
     parts = {
         "scene": n_triangles * TRIANGLE_BYTES,
         "films": n_pixels * channels * (8 * films + OUTPUT_BYTES_PER_CHANNEL),
     }
     if ercuts:
         parts["G-buffer"] = n_pixels * s.shading_samples * GBUFFER_POINT_BYTES
-        parts["VPLs"] = _chains(n_pixels, s) * VPLS_PER_CHAIN * VPL_BYTES
+        chains = _chains(n_pixels, s)
+        parts["VPLs"] = int(chains * (VPL_SLOTS_PER_CHAIN * VPL_SLOT_BYTES + VPLS_PER_CHAIN * VPL_BYTES))
     return parts
 
 
 def _chains(n_pixels: int, s: RenderSettings) -> int:
-    """Expected chains Σ⌊U + e/(N·e_d)⌋ ≈ c·n·(seed energy / P), with a margin of 2."""
-    return int(2 * s.chains_per_pixel * n_pixels)
+    """Expected chains Σ⌊U + e/(N·e_d)⌋ ≈ c·n·(seed energy / P) (measured 0.95–1.03 c·n),
+    with a margin of 1.25."""
+    return int(1.25 * s.chains_per_pixel * n_pixels)
 
 
 def phase_parts(n_pixels: int, settings: RenderSettings, batch: int, seeds: int, e1: int,

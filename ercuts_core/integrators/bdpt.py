@@ -84,15 +84,9 @@ _PRODUCT_MAX = 1e300
 def _eval_pdf(bsdf: Bsdf, wo: NDArray, wi: NDArray) -> tuple[NDArray, NDArray]:
     """(f(wo, wi) (N, 3), pdf(wo → wi) (N,)) in one BSDF evaluation.
 
-    ``Bsdf.eval`` and ``Bsdf.pdf`` share one core; calling it once saves a third of the
-    connection cost. Falls back to the public pair if the core is not available.
+    ``Bsdf.eval`` and ``Bsdf.pdf`` share one core: :meth:`Bsdf.eval_pdf` runs it once.
     """
-    core = getattr(bsdf, "_eval_pdf", None)
-    if core is None:
-        return bsdf.eval(wo, wi), bsdf.pdf(wo, wi)
-    with np.errstate(under="ignore"):
-        f, pdf = core(wo, wi)[:2]
-    return f, pdf
+    return bsdf.eval_pdf(wo, wi)
 
 
 def _adjoint_correction(ns: NDArray, ng: NDArray, wo: NDArray, wi: NDArray) -> NDArray:

@@ -98,12 +98,12 @@ class PathIntegrator(Integrator):
         lights, tracer = self.scene.lights, self.scene.tracer
         n = len(wo)
         ls = lights.illuminate(surf.p, rng.random(n), rng.random((n, 2)))
-        f = bsdf.eval(wo, ls.wi)
+        f, pdf_bsdf = bsdf.eval_pdf(wo, ls.wi)
         cos = np.abs(dot(surf.ns, ls.wi))
         contrib = f * (cos / np.where(ls.valid, ls.pdf_w, 1.0))[:, None] * ls.Li
         kind = lights.kind[ls.light]
         nee_only = (kind == POINT) | (kind == SUN) | (kind == AREA)
-        w = np.where(nee_only, 1.0, power_heuristic(ls.pdf_w, bsdf.pdf(wo, ls.wi)))
+        w = np.where(nee_only, 1.0, power_heuristic(ls.pdf_w, pdf_bsdf))
         contrib *= w[:, None]
         test = ls.valid & (contrib.max(axis=1) > 0)
         out = np.zeros((n, 3))

@@ -5,6 +5,12 @@ t = 1 strategy) land at their own raster position and are normalised by the numb
 light subpaths, which is one per camera sample (pbrt-v3 ``Film::WriteImage(1/spp)``).
 Non-finite samples are replaced by zero and counted (pbrt/Cycles policy); tests assert
 the counter stays at zero.
+
+Light passes (Blender's Emission / Direct / Indirect, api.md): every contribution is also
+accumulated by its *path class*, the number of scattering vertices between camera and
+emitter clamped to 2 (:data:`LIGHT_PASSES`): 0 = an emitter or the world seen directly,
+1 = light scattered once toward the camera, 2 = everything else. The classes partition
+each sample, so emission + direct + indirect equals the image RGB up to float rounding.
 """
 from __future__ import annotations
 
@@ -12,6 +18,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .camera import Window
+
+#: Light-pass AOV names, indexed by path class (scattering vertices, clamped to 2).
+LIGHT_PASSES = ("emission", "direct", "indirect")
+
+
+def path_class(n_scatter: NDArray) -> NDArray:
+    """(N,) light-pass index of paths with ``n_scatter`` scattering vertices (0, 1, ≥2 → 0, 1, 2)."""
+    return np.minimum(np.asarray(n_scatter, np.int64), 2)
 
 
 class Film:
@@ -23,6 +37,10 @@ class Film:
         splat: (h·w, 3) float64 sum of splatted radiance.
         alpha: (h·w,) float64 sum of coverage.
         aov_sum: name → (h·w, C) float64 sums of first-hit AOVs.
+        color_parts, splat_parts: (3, h·w, 3) float64 the same sums split by path class
+            (:data:`LIGHT_PASSES`); ``color == color_parts.sum(0)`` up to rounding.
+        classified: every contribution so far came with its path class (else the light
+            passes are not reported).
         passes_done: complete passes (samples per pixel) accumulated.
         nonfinite: number of dropped non-finite samples.
     """
@@ -33,17 +51,25 @@ class Film:
         self.color = np.zeros((n, 3))
         self.splat = np.zeros((n, 3))
         self.alpha = np.zeros(n)
+        self.color_parts = np.zeros((3, n, 3))
+        self.splat_parts = np.zeros((3, n, 3))
+        self.classified = True
         self.aov_sum: dict[str, NDArray] = {}
         self.passes_done = 0
         self.nonfinite = 0
 
-    def _finite(self, L: NDArray) -> NDArray:
+    def _finite(self, L: NDArray, parts: NDArray | None = None) -> tuple[NDArray, NDArray | None]:
+        """Zero (and count) samples whose value or any path-class part is not finite."""
         ok = np.isfinite(L).all(axis=1)
+        if parts is not None:
+            ok &= np.isfinite(parts).all(axis=(0, 2))
         bad = int((~ok).sum())
         if bad:
             self.nonfinite += bad
             L = np.where(ok[:, None], L, 0.0)
-        return L
+            if parts is not None:
+                parts = np.where(ok[None, :, None], parts, 0.0)
+        return L, parts
 
     def _add(self, target: NDArray, pix: NDArray, values: NDArray) -> None:
         """target[pix] += values with repeated indices (bincount per channel is fastest)."""
@@ -54,20 +80,46 @@ class Film:
         for c in range(values.shape[1]):
             target[:, c] += np.bincount(pix, weights=values[:, c], minlength=n)
 
-    def add_samples(self, pix: NDArray, L: NDArray, alpha: NDArray) -> None:
-        """Accumulate camera samples: ``pix`` (N,) window pixel index, ``L`` (N, 3), ``alpha`` (N,)."""
-        self._add(self.color, pix, self._finite(L))
+    def add_samples(self, pix: NDArray, L: NDArray, alpha: NDArray, parts: NDArray | None = None) -> None:
+        """Accumulate camera samples: ``pix`` (N,) window pixel index, ``L`` (N, 3), ``alpha`` (N,);
+        ``parts`` (3, N, 3): ``L`` split by path class (``parts.sum(0) == L``)."""
+        L, parts = self._finite(L, parts)
+        self._add(self.color, pix, L)
         self._add(self.alpha, pix, alpha)
+        if parts is None:
+            self.classified = False
+            return
+        for c in range(3):
+            self._add(self.color_parts[c], pix, parts[c])
 
-    def add_splats(self, raster: NDArray, L: NDArray) -> None:
-        """Splat (N, 3) radiance at full-frame raster positions (N, 2); outside-window ones are dropped."""
+    def add_splats(self, raster: NDArray, L: NDArray, cls: NDArray | None = None) -> None:
+        """Splat (N, 3) radiance at full-frame raster positions (N, 2); outside-window ones are
+        dropped. ``cls`` (N,): path class of each splat (:func:`path_class`)."""
         w = self.window
         ix = np.floor(raster[:, 0]).astype(np.int64) - w.x0
         iy = np.floor(raster[:, 1]).astype(np.int64) - w.y0
         ok = (ix >= 0) & (ix < w.width) & (iy >= 0) & (iy < w.height)
+        if cls is None:
+            self.classified = False
         if not ok.any():
             return
-        self._add(self.splat, iy[ok] * w.width + ix[ok], self._finite(L[ok]))
+        pix = iy[ok] * w.width + ix[ok]
+        L = self._finite(L[ok])[0]
+        self._add(self.splat, pix, L)
+        if cls is not None:
+            cls = np.asarray(cls)[ok]
+            # One bincount over (class, pixel) cells: class c of pixel p is cell c·n + p.
+            self._add(self.splat_parts.reshape(-1, 3), cls * w.n_pixels + pix, L)
+
+    def set_pixels(self, parts: NDArray, alpha: NDArray) -> None:
+        """Replace the film by one finished pass: ``parts`` (3, h·w, 3) per-pixel radiance by
+        path class, ``alpha`` (h·w,) coverage (integrators that do not accumulate samples)."""
+        self.color_parts[:] = parts
+        self.color[:] = parts.sum(axis=0)
+        self.splat[:] = 0.0
+        self.splat_parts[:] = 0.0
+        self.alpha[:] = alpha
+        self.passes_done = 1
 
     def add_aov(self, name: str, pix: NDArray, values: NDArray) -> None:
         """Accumulate a first-hit AOV (N, C) (averaged over passes in :meth:`aovs`)."""
@@ -80,6 +132,9 @@ class Film:
         self.color += other.color
         self.splat += other.splat
         self.alpha += other.alpha
+        self.color_parts += other.color_parts
+        self.splat_parts += other.splat_parts
+        self.classified &= other.classified
         for k, v in other.aov_sum.items():
             self.aov_sum[k] = self.aov_sum.get(k, 0) + v
         self.nonfinite += other.nonfinite
@@ -96,7 +151,21 @@ class Film:
         return out.astype(np.float32)
 
     def aovs(self) -> dict[str, NDArray[np.float32]]:
+        """Per-pixel AOVs (h, w, C) float32: the first-hit ones and, when every contribution was
+        classified, the light passes 'emission', 'direct', 'indirect' (same normalisation as
+        :meth:`image`, so they sum to its RGB)."""
         spp = max(self.passes_done, 1)
         w = self.window
-        return {k: (v / spp).reshape(w.height, w.width, -1).astype(np.float32)
-                for k, v in self.aov_sum.items()}
+        out = {k: (v / spp).reshape(w.height, w.width, -1).astype(np.float32)
+               for k, v in self.aov_sum.items()}
+        if self.classified:
+            parts = self.light_parts()
+            for c, name in enumerate(LIGHT_PASSES):
+                out[name] = parts[c].reshape(w.height, w.width, 3).astype(np.float32)
+        return out
+
+    def light_parts(self) -> NDArray:
+        """(3, h·w, 3) float64 mean radiance per light pass (:data:`LIGHT_PASSES`), normalised
+        like :meth:`image`."""
+        spp = max(self.passes_done, 1)
+        return self.color_parts / spp + self.splat_parts / (spp * self.window.n_pixels)

@@ -98,7 +98,7 @@ def test_time_limit_covers_all_phases():
     assert r.image[..., :3].mean() > 0
 
 
-@pytest.mark.parametrize("phase", ["BDPT", "chains", "lightcuts"])
+@pytest.mark.parametrize("phase", ["BDPT", "chains", "Lightcuts"])
 def test_cancel_in_each_phase_returns_an_image(phase):
     def progress(fraction, message):
         return phase not in message

@@ -23,6 +23,7 @@ runs out stops cleanly (fewer passes, shorter chains, smaller cuts) and the stat
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -41,6 +42,7 @@ from ..sampling import luminance
 from ..scene import BuiltScene
 from ..settings import RenderSettings
 from ..vpl import GBuffer, build_gbuffer, g_clamp, make_vpls
+from ..render import progress_batch_pixels
 from .base import dot
 
 #: Shares of the remaining time limit per phase.
@@ -49,6 +51,12 @@ _SHARE = {"bdpt": 0.15, "chains": 0.30 / 0.85, "vpl": 0.15 / 0.55}
 _E1_RATE = 1.0e6
 #: Absolute lightcut error floor as a fraction of max_error × the mean pixel luminance.
 ABS_FLOOR = 0.1
+#: Progress fractions (start, end) of each phase over the whole render (messages start
+#: with the phase name, api.md); roughly the phases' time shares at default settings.
+PHASES = {"BDPT": (0.0, 0.25), "ER chains": (0.25, 0.35), "VPLs": (0.35, 0.4),
+          "Light tree": (0.4, 0.42), "Lightcuts": (0.42, 1.0)}
+#: Shading points whose specular lobe has a roughness below this count as glossy (er_caustic).
+GLOSSY_ROUGHNESS = 0.5
 
 
 class ErcutsIntegrator:
@@ -72,33 +80,37 @@ class ErcutsIntegrator:
         if clock.cancelled:
             film.merge(rough)
             return
+        clock.show(rough.image)
         t0 = time.perf_counter()
         g, _ = build_gbuffer(scene, s.shading_samples, rng)
-        direct = self._direct_image(g, rng)
+        base = self._direct_image(g, rng)
         P_all = rough_image_energy(rough.image())
-        P = max(P_all - float(luminance(direct).sum()), 0.0)
+        P = max(P_all - float(luminance(base.sum(axis=0)).sum()), 0.0)
         stats["P"], stats["P_all"] = P, P_all
         # Seeds: fresh paths, one sample per pixel.
         n_target = s.chains_per_pixel * s.chain_length * window.n_pixels
         e_d = P / n_target if n_target > 0 else 0.0
-        seeds, starts, stats["seed_paths"] = self._chain_seeds(e_d, rng)
+        seeds, starts, stats["seed_paths"] = self._chain_seeds(e_d, rng, clock)
         timings["seeds"] = time.perf_counter() - t0
-        clock.report(0.3, "Ercuts: ER chains")
+        if clock.cancelled:
+            film.merge(rough)
+            return
         # 2. ER chains.
         t0 = time.perf_counter()
         ctx = MutationContext(scene, s.max_depth + 1)
         enabled = (s.lens_perturbation, s.caustic_perturbation, s.multichain_perturbation,
                    s.bidirectional_mutation)
         deadline = self._deadline(clock, _SHARE["chains"])
+        label = f"| {int(starts.sum())} chains x {s.chain_length} steps"
         chains = run_chains(ctx, seeds.take(starts > 0), starts[starts > 0], s.chain_length, enabled,
-                            rng, lambda f: self._alive(clock, deadline, 0.3 + 0.3 * f, "Ercuts: ER chains"))
+                            rng, lambda f: self._alive(clock, deadline, "ER chains", 0.1 + 0.9 * f, label))
         timings["chains"] = time.perf_counter() - t0
         # With a shortened run every chain made the same number of steps: e_d stays P/n.
         n_states = chains.n_chains * chains.steps_done
         e_d = P / n_states if n_states else 0.0
         self._chain_stats(stats, chains, n_states)
         if clock.cancelled:
-            self._finish(film, direct, None, g, chains, None)
+            film.merge(rough)
             return
         # 3. VPLs.
         t0 = time.perf_counter()
@@ -108,23 +120,49 @@ class ErcutsIntegrator:
             budget = max(clock.remaining(), 0.0) * _SHARE["vpl"]
             n_e1 = int(min(n_e1, max(16, budget * _E1_RATE / max(int((chains.count > 0).sum()), 1))))
         stats["e1_samples"] = n_e1
-        vpls = make_vpls(scene, g, chains, e_d, gmax, n_e1, rng, chunk=self.memory.e1_chunk)
+        label = f"| {stats['vpls_after_merge']} VPLs x {n_e1} E1 samples"
+        vpls = make_vpls(scene, g, chains, e_d, gmax, n_e1, rng, chunk=self.memory.e1_chunk,
+                         keep_going=lambda f: clock.report(self._fraction("VPLs", f), f"VPLs {100 * f:.0f}% {label}"))
         timings["vpls"] = time.perf_counter() - t0
+        if clock.cancelled:
+            film.merge(rough)
+            return
         stats["vpls"] = len(vpls)
+        stats["vpls_emitter"] = int(vpls.emitter.sum())
         stats["vpls_unlit_fallback"] = int(chains.count[chains.count > 0].size - len(vpls))
-        clock.report(0.7, "Ercuts: light tree")
         # 4. Light tree.
         t0 = time.perf_counter()
         tree = None
         if s.gather == "LIGHTCUTS" and len(vpls):
+            clock.report(self._fraction("Light tree", 0.0), f"Light tree | {len(vpls)} VPLs")
             tree = build_light_tree(vpls.position, vpls.normal, vpls.intensity, seed=s.seed)
         timings["tree"] = time.perf_counter() - t0
+        if not clock.report(self._fraction("Light tree", 1.0), f"Light tree | {len(vpls)} VPLs"):
+            film.merge(rough)
+            return
         # 5. Lightcuts (or the brute-force ablation).
         t0 = time.perf_counter()
-        gather, cut = self._gather(g, vpls, tree, gmax, clock, stats)
+        alpha = self._alpha(g)
+        rough_parts = rough.light_parts()
+
+        def show(point_parts, complete):
+            parts = self._compose(base, self._per_pixel_parts(point_parts, g.samples), None, 1.0)
+            clock.show(lambda: _rgba(window, np.where(complete[None, :, None], parts, rough_parts), alpha))
+
+        gathered = self._gather(g, vpls, tree, gmax, clock, stats, show)
         timings["cuts"] = time.perf_counter() - t0
-        gather = self._conserve_energy(gather, vpls, P, stats)
-        self._finish(film, direct + gather, vpls, g, chains, cut)
+        scale = self._energy_scale(gathered.parts.sum(axis=0), vpls, P, stats)
+        light = self._compose(base, gathered.parts, vpls, scale)
+        if not gathered.complete.all():     # cancelled: the rough image where not gathered
+            light = np.where(gathered.complete[None, :, None], light, rough_parts)
+        film.set_pixels(light, alpha)
+        self._finish(film, g, chains, vpls, gathered, scale)
+
+    @staticmethod
+    def _fraction(phase: str, f: float) -> float:
+        """Progress over the whole render of fraction ``f`` of ``phase`` (:data:`PHASES`)."""
+        lo, hi = PHASES[phase]
+        return lo + (hi - lo) * min(max(f, 0.0), 1.0)
 
     def _deadline(self, clock, share: float) -> float | None:
         if clock.deadline is None:
@@ -132,8 +170,8 @@ class ErcutsIntegrator:
         now = time.perf_counter()
         return now + max(clock.deadline - now, 0.0) * share
 
-    def _alive(self, clock, deadline, fraction, message) -> bool:
-        ok = clock.report(fraction, message)
+    def _alive(self, clock, deadline, phase: str, f: float, label: str) -> bool:
+        ok = clock.report(self._fraction(phase, f), f"{phase} {100 * f:.0f}% {label}")
         return ok and (deadline is None or time.perf_counter() < deadline)
 
     # ------------------------------------------------------------------ phase 1
@@ -145,17 +183,18 @@ class ErcutsIntegrator:
         window = scene.camera.window
         rough = Film(window)
         n = window.n_pixels
-        batch = self.memory.batch_pixels
+        batch = min(self.memory.batch_pixels, progress_batch_pixels(s))
         for k in range(s.samples):
             part = Film(window)
             for start in range(0, n, batch):
                 rng = np.random.default_rng([s.seed, k, start])
                 bdpt.render_batch(part, np.arange(start, min(n, start + batch)), rng)
-                if not clock.report(0.25 * (k + min(n, start + batch) / n) / s.samples,
-                                    f"Ercuts: BDPT sample {k + 1}/{s.samples}"):
+                if not clock.report(self._fraction("BDPT", (k + min(n, start + batch) / n) / s.samples),
+                                    f"BDPT sample {k + 1}/{s.samples}"):
                     break
             if not clock.cancelled or rough.passes_done == 0:
                 rough.merge(part)
+                clock.show(rough.image)
             if clock.cancelled or (deadline is not None and time.perf_counter() > deadline and k > 0):
                 break
         return rough, rough.passes_done
@@ -167,14 +206,16 @@ class ErcutsIntegrator:
             return seed_paths(scene, s, rng, pix)
         return seeds_from_path_tracer(scene, s.max_depth, rng, pix)
 
-    def _chain_seeds(self, e_d: float, rng):
-        """Seed paths and their chain counts, in batches of ``memory.seed_pixels`` pixels; only
-        seeds that start a chain are kept, so the seed memory is that of one batch."""
+    def _chain_seeds(self, e_d: float, rng, clock):
+        """Seed paths and their chain counts, in batches of ``memory.seed_pixels`` pixels (at
+        most :func:`~ercuts_core.render.progress_batch_pixels`, reporting progress after each);
+        only seeds that start a chain are kept, so the seed memory is that of one batch."""
         s, n = self.settings, self.scene.camera.window.n_pixels
-        step = self.memory.seed_pixels
+        step = min(self.memory.seed_pixels, progress_batch_pixels(s))
         if step >= n:
             seeds, energy = self._seeds(rng)
             starts = chain_starts(energy, s.chain_length, e_d, rng)
+            clock.report(self._fraction("ER chains", 0.1), "ER chains: seed paths 100%")
             return seeds, starts, len(seeds)
         kept, counts, total = [], [], 0
         for start in range(0, n, step):
@@ -183,20 +224,24 @@ class ErcutsIntegrator:
             kept.append(seeds.take(np.flatnonzero(starts > 0)))
             counts.append(starts[starts > 0])
             total += len(seeds)
+            f = min(n, start + step) / n
+            if not clock.report(self._fraction("ER chains", 0.1 * f), f"ER chains: seed paths {100 * f:.0f}%"):
+                break
         return PathBatch.concat(kept), np.concatenate(counts), total
 
     # ------------------------------------------------------------------ non-VPL light
     def _direct_image(self, g: GBuffer, rng, n_light_samples: int = 4) -> NDArray:
-        """(h·w, 3) light seen directly plus direct light from point, spot, sun and environment."""
+        """(3, h·w, 3) by light pass: [emitters and world seen directly, direct light from
+        point, spot, sun and environment (next-event estimation), zeros]."""
         scene, s = self.scene, self.settings
         lights = scene.lights
         window = scene.camera.window
         S = g.samples
-        L = np.zeros((len(g.pixel), 3))
+        L = np.zeros((3, len(g.pixel), 3))
         hit = g.valid
-        L[hit] = scene.emission(g.surf.subset(np.flatnonzero(hit)))
+        L[0, hit] = scene.emission(g.surf.subset(np.flatnonzero(hit)))
         if lights.env_light >= 0 and not s.film_transparent:
-            L[~hit] = lights.env_L
+            L[0, ~hit] = lights.env_L
         nonvpl = np.isin(lights.kind, [POINT, SUN, ENV])
         if nonvpl.any() and hit.any():
             h = np.flatnonzero(hit)
@@ -213,35 +258,56 @@ class ErcutsIntegrator:
                     target = np.where(infinite[:, None], g.p[h[t]] + ls.wi[t] * 4 * scene.scene_radius, ls.p[t])
                     vis = scene.tracer.visible(g.p[h[t]], g.ng[h[t]], target, None)
                     acc[t] += c[t] * vis[:, None]
-            L[h] += acc / n_light_samples
-        return self._per_pixel(L, window.n_pixels, S)
+            L[1, h] = acc / n_light_samples
+        return self._per_pixel_parts(L, S)
 
     @staticmethod
     def _per_pixel(values: NDArray, n_pixels: int, S: int) -> NDArray:
         """Average the S shading points of each pixel: (n_pixels·S, C) → (n_pixels, C)."""
         return values.reshape(n_pixels, S, -1).mean(axis=1)
 
+    @staticmethod
+    def _per_pixel_parts(values: NDArray, S: int) -> NDArray:
+        """(K, n_pixels·S, 3) → (K, n_pixels, 3): :meth:`_per_pixel` of each part."""
+        K, Q = values.shape[:2]
+        return values.reshape(K, Q // S, S, 3).mean(axis=2)
+
     # ------------------------------------------------------------------ phase 5
-    def _gather(self, g: GBuffer, vpls, tree, gmax: float, clock, stats) -> tuple[NDArray, NDArray]:
+    def _gather(self, g: GBuffer, vpls, tree, gmax: float, clock, stats, show) -> "_Gathered":
+        """VPL light at every shading point, split into the light of emitter VPLs (direct) and
+        of the others (indirect); ``show(point_parts, complete)`` after every batch (preview).
+
+        Cancelling (or running out of time) stops after the current batch; a cancel during a
+        lightcut batch stops its refinement, so the batch keeps coarser but complete cuts.
+        """
         scene, s = self.scene, self.settings
         window = scene.camera.window
-        Q = len(g.pixel)
-        L = np.zeros((Q, 3))
+        Q, S = len(g.pixel), g.samples
+        L = np.zeros((2, Q, 3))              # [from emitter VPLs, from the others]
         cut = np.zeros(Q)
-        if len(vpls) == 0:
-            return self._per_pixel(L, window.n_pixels, g.samples), self._per_pixel(cut[:, None], window.n_pixels, g.samples)
+        done_pt = ~g.valid                   # misses need no gather
         pts_all = np.flatnonzero(g.valid)
+        if len(vpls) == 0:
+            pts_all = pts_all[:0]
         # Absolute error floor (algorithm.md §G.6; not in the papers): below a small fraction
         # of the mean pixel luminance, Weber's law no longer applies (dark pixels would refine
         # to max_cut_size for errors nobody can see).
         floor = s.max_error * ABS_FLOOR * stats.get("P", 0.0) / max(window.n_pixels, 1)
         f_bound = bsdf_max_value(scene.materials, g.mat)
         clamp = 0.0 if not np.isfinite(gmax) else gmax
+        share = _emitter_share(tree, vpls) if tree is not None else None
         rays = 0
         clamped = 0.0
         done = 0
         cap = s.max_cut_size
         t_start = time.perf_counter()
+
+        def report(f_done):
+            f = f_done / max(len(pts_all), 1)
+            return clock.poll(self._fraction("Lightcuts", f),
+                              f"Lightcuts {100 * f:.0f}% | {rays / 1e6:.2f}M shadow rays") \
+                and clock.remaining() > 0
+
         # A small first batch calibrates the cost per point before the cap is fitted.
         edges = np.unique(np.r_[0, np.arange(min(256, len(pts_all)), len(pts_all), self.memory.gather_batch),
                                 len(pts_all)])
@@ -251,31 +317,49 @@ class ErcutsIntegrator:
             if s.gather == "LIGHTCUTS":
                 res = lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
                                max_error=s.max_error, max_cut_size=cap, clamp=clamp,
-                               abs_floor=floor)
-                L[idx], cut[idx] = res.radiance, res.cut_size
+                               abs_floor=floor, return_cut=True, on_round=lambda: report(start))
+                em = _sum_rows(res.cut_point, res.cut_estimate * share[res.cut_node], len(idx))
+                L[0, idx], L[1, idx], cut[idx] = em, res.radiance - em, res.cut_size
                 rays += res.shadow_rays
                 clamped += res.clamped_energy
             else:
-                L[idx] = brute_force(vpls.position, vpls.normal, vpls.intensity, pts, clamp=clamp)
+                for part, sel in enumerate((vpls.emitter, ~vpls.emitter)):
+                    if sel.any():
+                        L[part, idx] = brute_force(vpls.position[sel], vpls.normal[sel],
+                                                   vpls.intensity[sel], pts, clamp=clamp)
                 cut[idx] = len(vpls)
                 rays += len(idx) * len(vpls)
             done = start + len(idx)
+            done_pt[idx] = True
             cap = self._fit_cap(cap, cut[idx].mean(), done, len(pts_all) - done,
                                 time.perf_counter() - t_start, clock.remaining())
-            if not clock.poll(0.7 + 0.3 * done / max(len(pts_all), 1), "Ercuts: lightcuts") or \
-                    (done < len(pts_all) and clock.remaining() <= 0):
+            if not report(done) and done < len(pts_all):
                 stats["gather_incomplete"] = 1
                 clock.cancelled = True
                 break
+            show(L, done_pt.reshape(-1, S).all(axis=1))
         if cap < s.max_cut_size:
             stats["cut_cap_for_time_limit"] = cap
         valid_cut = cut[pts_all[:done]] if done else np.zeros(1)
         stats["cut_size_mean"] = float(valid_cut.mean()) if done else 0.0
         stats["cut_size_max"] = int(valid_cut.max()) if done else 0
         stats["gather_shadow_rays"] = rays
-        stats["clamped_energy"] = clamped / g.samples
-        return (self._per_pixel(L, window.n_pixels, g.samples),
-                self._per_pixel(cut[:, None], window.n_pixels, g.samples))
+        stats["clamped_energy"] = clamped / S
+        glossy = self._glossy(g)
+        return _Gathered(parts=self._per_pixel_parts(L, S),
+                         glossy=self._per_pixel(L.sum(axis=0) * glossy[:, None], window.n_pixels, S),
+                         cut=self._per_pixel(cut[:, None], window.n_pixels, S),
+                         complete=done_pt.reshape(-1, S).all(axis=1))
+
+    def _glossy(self, g: GBuffer) -> NDArray:
+        """(Q,) shading points with a specular lobe of roughness < :data:`GLOSSY_ROUGHNESS`."""
+        table = self.scene.materials
+        h = np.flatnonzero(g.valid)
+        out = np.zeros(len(g.pixel), bool)
+        if len(h):
+            bsdf = Bsdf.from_table(table, g.mat[h], g.ns[h], g.ng[h])
+            out[h] = ~bsdf.is_diffuse & (np.asarray(table.roughness)[g.mat[h]] < GLOSSY_ROUGHNESS)
+        return out
 
     @staticmethod
     def _fit_cap(cap: int, mean_cut: float, done: int, left: int, elapsed: float, remaining: float) -> int:
@@ -306,21 +390,38 @@ class ErcutsIntegrator:
 
         return ShadingPoints(p, g.ns[idx], wo, f_bound[idx], eval_f, visible)
 
-    def _conserve_energy(self, gather: NDArray, vpls, P: float, stats: dict) -> NDArray:
-        """Scale the VPL image so that its energy is P (paper §3.3: every path carries P/n).
+    def _energy_scale(self, gather: NDArray, vpls, P: float, stats: dict) -> float:
+        """The factor that makes the VPL image's energy P (paper §3.3: every path carries P/n).
 
         Each VPL is normalised by its own estimate Ê1 (vpl.py); the average of 1/Ê1 is
         biased high (Jensen), a few per cent with 256 light-traced samples. The ratio
         P / E(VPL image) removes that bias globally while the per-VPL Ê1 keep the relative
-        intensities. The raw ratio is reported as ``vpl_energy_ratio`` (1 = unbiased).
+        intensities. The raw ratio is reported as ``vpl_energy_ratio`` (1 = unbiased); an
+        incomplete gather is not rescaled (returns 1).
         """
         energy = float(luminance(gather + vpls.fallback).sum())
         stats["vpl_energy_ratio"] = energy / P if P > 0 else 0.0
         if energy <= 0 or P <= 0 or stats.get("gather_incomplete"):
-            return gather
-        scale = P / energy
-        vpls.fallback *= scale
-        return gather * scale
+            return 1.0
+        return P / energy
+
+    @staticmethod
+    def _compose(base: NDArray, gather: NDArray, vpls, scale: float) -> NDArray:
+        """(3, h·w, 3) light passes: ``base`` (emission, non-VPL direct) plus the gathered light
+        of emitter VPLs (direct) and of the others (indirect), and the ERPT fallback of VPLs
+        that lit no sampled pixel, all VPL light times ``scale``."""
+        out = base.copy()
+        out[1] += gather[0] * scale
+        out[2] += gather[1] * scale
+        if vpls is not None:
+            out[1] += vpls.fallback_emitter * scale
+            out[2] += (vpls.fallback - vpls.fallback_emitter) * scale
+        return out
+
+    def _alpha(self, g: GBuffer) -> NDArray:
+        """(h·w,) coverage: the fraction of shading points that hit, or 1."""
+        hit = g.valid.astype(np.float64) if self.settings.film_transparent else np.ones(len(g.pixel))
+        return self._per_pixel(hit[:, None], self.scene.camera.window.n_pixels, g.samples)[:, 0]
 
     # ------------------------------------------------------------------ output
     def _chain_stats(self, stats: dict, chains, n_states: int) -> None:
@@ -335,19 +436,72 @@ class ErcutsIntegrator:
             stats[f"accepted_{name}"] = int(chains.accepted[i])
             stats[f"acceptance_{name}"] = float(chains.accepted[i] / chains.proposed[i]) if chains.proposed[i] else 0.0
 
-    def _finish(self, film: Film, image: NDArray, vpls, g: GBuffer, chains, cut) -> None:
-        """Put the one-pass result into the film (color, alpha, AOVs)."""
+    def _finish(self, film: Film, g: GBuffer, chains, vpls, gathered: "_Gathered", scale: float) -> None:
+        """First-hit and Ercuts AOVs of the one-pass result (module docstring)."""
         window = self.scene.camera.window
-        if vpls is not None:
-            image = image + vpls.fallback
-        film.color[:] = image
-        hit = g.valid.astype(np.float64) if self.settings.film_transparent else np.ones(len(g.pixel))
-        film.alpha[:] = self._per_pixel(hit[:, None], window.n_pixels, g.samples)[:, 0]
+        n, S = window.n_pixels, g.samples
+        h = np.flatnonzero(g.valid)
         depth = np.where(g.valid, g.surf.t, 1e10)[:, None]
-        film.aov_sum["depth"] = self._per_pixel(depth, window.n_pixels, g.samples)
-        film.aov_sum["normal"] = self._per_pixel(np.where(g.valid[:, None], g.ns, 0.0), window.n_pixels, g.samples)
-        if chains is not None:
-            film.aov_sum["chain_deposits"] = chains.deposits_per_pixel[:, None].astype(np.float64)
-        if cut is not None:
-            film.aov_sum["cut_size"] = cut
-        film.passes_done = 1
+        albedo = np.zeros((len(g.pixel), 3))
+        if len(h):
+            albedo[h] = Bsdf.from_table(self.scene.materials, g.mat[h], g.ns[h], g.ng[h]).albedo()
+        film.aov_sum["depth"] = self._per_pixel(depth, n, S)
+        film.aov_sum["normal"] = self._per_pixel(np.where(g.valid[:, None], g.ns, 0.0), n, S)
+        film.aov_sum["albedo"] = self._per_pixel(albedo, n, S)
+        film.aov_sum["chain_deposits"] = chains.deposits_per_pixel[:, None].astype(np.float64)
+        film.aov_sum["cut_size"] = gathered.cut
+        film.aov_sum["vpl_density"] = self._vpl_density(vpls)[:, None]
+        film.aov_sum["er_caustic"] = (gathered.glossy + vpls.fallback) * scale * gathered.complete[:, None]
+
+    def _vpl_density(self, vpls) -> NDArray:
+        """(h·w,) number of VPLs seen by the camera in each pixel (position projected to the
+        image, unoccluded)."""
+        scene = self.scene
+        cam, window = scene.camera, scene.camera.window
+        out = np.zeros(window.n_pixels)
+        if len(vpls) == 0:
+            return out
+        raster, ok = cam.raster_of(vpls.position)
+        ix = np.floor(raster[:, 0]).astype(np.int64) - window.x0
+        iy = np.floor(raster[:, 1]).astype(np.int64) - window.y0
+        k = np.flatnonzero(ok & (ix >= 0) & (ix < window.width) & (iy >= 0) & (iy < window.height))
+        if len(k) == 0:
+            return out
+        p = vpls.position[k]
+        eye = p - cam.forward * 4.0 * scene.scene_radius if cam.ortho else np.broadcast_to(cam.position, p.shape)
+        n = vpls.normal[k] * np.where(dot(vpls.normal[k], eye - p) < 0, -1.0, 1.0)[:, None]
+        vis = scene.tracer.visible(p, n, np.ascontiguousarray(eye), None)
+        return np.bincount((iy * window.width + ix)[k[vis]], minlength=window.n_pixels).astype(np.float64)
+
+
+@dataclass
+class _Gathered:
+    """The VPL gather per pixel: ``parts`` (2, h·w, 3) light of emitter VPLs (direct) and of
+    the others (indirect), before the energy scale; ``glossy`` (h·w, 3) the part gathered at
+    glossy shading points; ``cut`` (h·w, 1) mean cut size; ``complete`` (h·w,) every shading
+    point of the pixel was gathered."""
+
+    parts: NDArray
+    glossy: NDArray
+    cut: NDArray
+    complete: NDArray
+
+
+def _emitter_share(tree, vpls) -> NDArray:
+    """(n_nodes, 3) fraction of each light-tree node's intensity that comes from emitter VPLs
+    (the subtree sums of ``vpls.emitter`` intensities over the node's intensity)."""
+    em = vpls.intensity * vpls.emitter[:, None]
+    cs = np.vstack([np.zeros((1, 3)), np.cumsum(em[tree.leaf_order], axis=0)])
+    sub = cs[tree.leaf_start + tree.leaf_count] - cs[tree.leaf_start]
+    return np.divide(sub, tree.intensity, out=np.zeros_like(sub), where=tree.intensity > 0)
+
+
+def _sum_rows(group: NDArray, values: NDArray, n: int) -> NDArray:
+    """(n, 3) per-group sums of (K, 3) rows."""
+    return np.stack([np.bincount(group, weights=values[:, c], minlength=n) for c in range(3)], axis=1)
+
+
+def _rgba(window, parts: NDArray, alpha: NDArray) -> NDArray:
+    """(h, w, 4) float32 image of (3, h·w, 3) light passes and (h·w,) alpha."""
+    rgba = np.concatenate([parts.sum(axis=0), alpha[:, None]], axis=1)
+    return rgba.reshape(window.height, window.width, 4).astype(np.float32)

@@ -9,6 +9,9 @@ spot, sun, area) get MIS weight 1 in next-event estimation. Russian roulette sta
 ``rr_depth`` bounces with survival probability min(1, max(β)) [Arvo & Kirk 1990].
 
 Depth convention (pbrt): ``max_depth`` = number of scattering vertices; 1 = direct light.
+Light passes: emission found after ``depth`` bounces has ``depth`` scattering vertices and
+next-event estimation at bounce ``depth`` has ``depth + 1``; each is added to the film's
+path class (:func:`~ercuts_core.film.path_class`: emission / direct / indirect).
 """
 from __future__ import annotations
 
@@ -29,7 +32,7 @@ class PathIntegrator(Integrator):
         lights, tracer = scene.lights, scene.tracer
         n = len(pix)
         o, d = self.camera_rays(pix, rng)
-        L = np.zeros((n, 3))
+        L = np.zeros((3, n, 3))            # radiance by path class (emission, direct, indirect)
         beta = np.ones((n, 3))
         idx = np.arange(n)                 # lane → sample
         prev_pdf = np.zeros(n)             # BSDF pdf of the ray that led here (0: camera ray)
@@ -48,7 +51,7 @@ class PathIntegrator(Integrator):
                     prev_pdf[m], lights.pdf_illuminate_env(int(m.sum())))
                 visible_env = not (depth == 0 and s.film_transparent)
                 if visible_env:
-                    L[idx[m]] += beta[m] * Le * w[:, None]
+                    L[min(depth, 2), idx[m]] += beta[m] * Le * w[:, None]
             if hit.any() and len(lights.emissive_tris):
                 Le = scene.emission(surf)
                 em = hit & (Le.max(axis=1) > 0)
@@ -57,7 +60,7 @@ class PathIntegrator(Integrator):
                     if depth > 0:
                         pdf_l = lights.pdf_illuminate_tri(prev_p[em], surf.prim[em], surf.p[em], surf.ng[em])
                         w = power_heuristic(prev_pdf[em], pdf_l)
-                    L[idx[em]] += beta[em] * Le[em] * w[:, None]
+                    L[min(depth, 2), idx[em]] += beta[em] * Le[em] * w[:, None]
             # Keep only paths that hit something and may scatter again.
             if depth == s.max_depth:
                 if depth == 0:
@@ -74,7 +77,7 @@ class PathIntegrator(Integrator):
                 break
             if not lights.empty:
                 L_nee = self._next_event(surf, wo, bsdf, rng)
-                L[idx] += beta * L_nee
+                L[min(depth + 1, 2), idx] += beta * L_nee
             # Sample the BSDF for the next bounce.
             bs = bsdf.sample(wo, rng.random((len(idx), 3)))
             beta = beta * bs.weight
@@ -91,7 +94,7 @@ class PathIntegrator(Integrator):
             d = bs.wi[keep]
             prev_pdf, prev_p = bs.pdf[keep], surf.p
             o = tracer.offset(surf.p, surf.ng, d)
-        film.add_samples(pix, L, alpha)
+        film.add_samples(pix, L.sum(axis=0), alpha, parts=L)
 
     def _next_event(self, surf, wo: NDArray, bsdf: Bsdf, rng: np.random.Generator) -> NDArray:
         """(N, 3) direct light at the surfaces: f·|cos|·Li·V·w / pdf."""

@@ -39,6 +39,8 @@ class ChainResult:
         deposits_per_pixel: (h·w,) chain states per window pixel (diagnostic image).
         n_chains, n_steps: chains run and steps per chain.
         nan_acceptances: acceptance values that were not finite (must stay 0).
+        emitter: (V,) bool, x2 is the path's light vertex (k = 2: the VPL carries direct
+            light from a surface emitter; else x2 scatters and it carries indirect light).
     """
 
     position: NDArray
@@ -54,6 +56,7 @@ class ChainResult:
     nan_acceptances: int = 0
     steps_done: int = 0
     stats: dict = field(default_factory=dict)
+    emitter: NDArray | None = None
 
     @property
     def n_vpls(self) -> int:
@@ -70,15 +73,16 @@ class _VPLStore:
         self.home = np.zeros((capacity, 2))
         self.count = np.zeros(capacity)
         self.color_sum = np.zeros((capacity, 3))
+        self.emitter = np.zeros(capacity, bool)
 
     def _grow(self, need: int) -> None:
         cap = len(self.count)
         if need <= cap:
             return
         new = max(need, 2 * cap)
-        for name in ("position", "normal", "home", "count", "color_sum"):
+        for name in ("position", "normal", "home", "count", "color_sum", "emitter"):
             old = getattr(self, name)
-            arr = np.zeros((new,) + old.shape[1:])
+            arr = np.zeros((new,) + old.shape[1:], old.dtype)
             arr[:cap] = old
             setattr(self, name, arr)
 
@@ -93,6 +97,7 @@ class _VPLStore:
         self.position[ids] = x2
         self.normal[ids] = np.where(flip[:, None], -n, n)
         self.home[ids] = paths.raster
+        self.emitter[ids] = paths.k == 2
         self.n += m
         return ids
 
@@ -177,7 +182,7 @@ def run_chains(ctx: MutationContext, seeds: PathBatch, starts: NDArray, n_steps:
     n = store.n
     return ChainResult(store.position[:n], store.normal[:n], store.count[:n], store.color_sum[:n],
                        store.home[:n], proposed, accepted, deposits, C, n_steps, nan_count, steps_done,
-                       {"mutation_names": NAMES})
+                       {"mutation_names": NAMES}, store.emitter[:n])
 
 
 def _relative(c: NDArray) -> NDArray:

@@ -413,7 +413,7 @@ def _retire(tree: LightTree, e: _Entries, acc: _Accum) -> _Entries:
 def lightcut(tree: LightTree, vpl_pos: NDArray, vpl_normal: NDArray, vpl_intensity: NDArray,
              pts: ShadingPoints, *, max_error: float = 0.02, max_cut_size: int = 1000,
              clamp: float = 0.0, abs_floor: float = 0.0, error_mode: str = "bound",
-             return_cut: bool = False) -> LightcutResult:
+             return_cut: bool = False, on_round=None) -> LightcutResult:
     """Batched lightcut radiance at P shading points.
 
     Args:
@@ -435,6 +435,9 @@ def lightcut(tree: LightTree, vpl_pos: NDArray, vpl_normal: NDArray, vpl_intensi
             |L̃ − L| ≤ ε·L in luminance (L = exact sum) unless the cut size cap is hit;
             far more expensive because the bounds are loose.
         return_cut: also return the final cut entries (see :class:`LightcutResult`).
+        on_round: optional ``on_round() -> bool | None`` called after every refinement
+            round (progress reports); False stops refining: every point keeps its current,
+            coarser cut (a complete estimate).
 
     Returns:
         :class:`LightcutResult`.
@@ -471,6 +474,8 @@ def lightcut(tree: LightTree, vpl_pos: NDArray, vpl_normal: NDArray, vpl_intensi
         e = _retire(tree, _Entries.cat([e.take(np.flatnonzero(keep)), kids]), acc)
         rays += new_rays
         rounds += 1
+        if on_round is not None and on_round() is False:
+            break
     acc.add(tree, e)
     return _result(tree, acc, rays, rounds)
 

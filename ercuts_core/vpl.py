@@ -107,6 +107,8 @@ class VPLSet:
         count: (V,) deposits; e1: (V,) estimated image energy at unit intensity.
         fallback: (h·w, 3) image of the states whose VPL lit no sampled pixel (splatted
             ERPT-style at their home pixel so that no energy is lost).
+        emitter: (V,) bool, the VPL sits on its paths' light vertex (carries direct light).
+        fallback_emitter: (h·w, 3) the part of ``fallback`` from such VPLs.
     """
 
     position: NDArray
@@ -115,6 +117,8 @@ class VPLSet:
     count: NDArray
     e1: NDArray
     fallback: NDArray
+    emitter: NDArray | None = None
+    fallback_emitter: NDArray | None = None
 
     def __len__(self) -> int:
         return len(self.count)
@@ -161,7 +165,7 @@ def estimate_e1(scene: BuiltScene, g: GBuffer, window: Window, pos: NDArray, nor
 
 def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, color: NDArray,
                               gmax: float, n_samples: int, rng: np.random.Generator,
-                              chunk: int = 1 << 18) -> NDArray:
+                              chunk: int = 1 << 18, keep_going=None) -> NDArray:
     """(V,) Ê1 by tracing the VPL's own cosine emission one bounce to the camera.
 
     E1 = ∫_Ω f_r(y)·cosθ_v·|n_g(y)·ω_cam|·F(y)·V dω with F = 1/(A_pix·cos³θ·d_cam²) the
@@ -169,6 +173,7 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
     is π·f_r(y)·(|n_s·ω_in|/|n_g·ω_in|)·|n_g·ω_cam|·F(y)·V_cam, times min(1, g_max·d²/cosθ_v)
     for the geometry clamp. Bounded for diffuse receivers away from the lens, unlike
     sampling pixels, whose samples near the VPL carry the 1/d² peak.
+    ``keep_going(fraction) -> bool`` is called after each chunk; False stops (the rest stay 0).
     """
     from .sampling import coordinate_system, sample_cosine_hemisphere, to_world
     cam = scene.camera
@@ -210,13 +215,17 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
                     vis = scene.tracer.visible(yk.p[good], ng[good], cam_pos, None)
                     val[h[k[good]]] = contrib[good] * vis
         total[v] = np.bincount(vv - s, weights=val, minlength=len(v)) / n_samples
+        if keep_going is not None and not keep_going((s + len(v)) / V):
+            break
     return total
 
 
 def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gmax: float,
-              n_samples: int, rng: np.random.Generator, chunk: int = 1 << 18) -> VPLSet:
+              n_samples: int, rng: np.random.Generator, chunk: int = 1 << 18,
+              keep_going=None) -> VPLSet:
     """Normalise the chains' VPLs: I_v = k_v·e_d / Ê1(v) · c_v (module docstring); ``chunk``
-    E1 samples are traced together (the memory budget's ``e1_chunk``)."""
+    E1 samples are traced together (the memory budget's ``e1_chunk``); ``keep_going`` as in
+    :func:`estimate_e1_light_tracing` (when it stops, the VPL set is incomplete)."""
     window = scene.camera.window
     used = chains.count > 0
     pos, normal = chains.position[used], chains.normal[used]
@@ -224,14 +233,17 @@ def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gm
     color = chains.color_sum[used] / count[:, None]
     y = luminance(color)
     color = np.where(y[:, None] > 0, color / np.where(y > 0, y, 1.0)[:, None], 0.0)
-    e1 = estimate_e1_light_tracing(scene, pos, normal, color, gmax, n_samples, rng, chunk)
+    emitter = chains.emitter[used] if chains.emitter is not None else np.zeros(len(count), bool)
+    e1 = estimate_e1_light_tracing(scene, pos, normal, color, gmax, n_samples, rng, chunk, keep_going)
     miss = e1 <= 0
-    if miss.any():   # the emission found no camera-visible point: sample pixels instead
+    # The emission found no camera-visible point: sample pixels instead (unless stopped).
+    if miss.any() and (keep_going is None or keep_going(1.0)):
         e1[miss] = estimate_e1(scene, g, window, pos[miss], normal[miss], color[miss], home[miss],
                                gmax, n_samples, rng, chunk=chunk)
     lit = e1 > 0
     intensity = np.where(lit[:, None], (count * e_d / np.where(lit, e1, 1.0))[:, None] * color, 0.0)
     fallback = np.zeros((window.n_pixels, 3))
+    fallback_emitter = np.zeros((window.n_pixels, 3))
     if (~lit).any():
         hx = np.clip(np.floor(home[~lit, 0]).astype(np.int64) - window.x0, 0, window.width - 1)
         hy = np.clip(np.floor(home[~lit, 1]).astype(np.int64) - window.y0, 0, window.height - 1)
@@ -239,7 +251,10 @@ def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gm
         pix = hy * window.width + hx
         for c in range(3):
             fallback[:, c] = np.bincount(pix, weights=val[:, c], minlength=window.n_pixels)
-    return VPLSet(pos[lit], normal[lit], intensity[lit], count[lit], e1[lit], fallback)
+            fallback_emitter[:, c] = np.bincount(pix, weights=val[:, c] * emitter[~lit],
+                                                 minlength=window.n_pixels)
+    return VPLSet(pos[lit], normal[lit], intensity[lit], count[lit], e1[lit], fallback,
+                  emitter[lit], fallback_emitter)
 
 
 def material_bound(scene: BuiltScene, g: GBuffer) -> NDArray:

@@ -68,7 +68,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..bsdf import Bsdf
-from ..film import Film
+from ..film import Film, path_class
 from ..lights import AREA, ENV, POINT, SUN, TRI
 from ..paths import PathBatch, is_target
 from ..sampling import luminance
@@ -229,7 +229,7 @@ class BDPTIntegrator(Integrator):
         # Trace the camera and light subpaths
         cam, alpha = self._camera_subpaths(film, pix, rng)
         lig, no_s0 = self._light_subpaths(n, rng)
-        L = np.zeros((n, 3))
+        L = np.zeros((3, n, 3))                  # by path class (film.path_class of s + t − 2)
         # Execute all connection strategies, one group of (s, t) pairs at a time
         with np.errstate(over="ignore", under="ignore"):
             for lane, s, t in self._rows_s0(cam).chunks(self.max_rows):
@@ -243,20 +243,23 @@ class BDPTIntegrator(Integrator):
             if not self.camera.is_delta_direction:
                 for lane, s, t in self._rows_t1(lig).chunks(self.max_rows):
                     self._connect_camera(film, lig, no_s0, lane, s, t)
-        film.add_samples(pix, L, alpha)
+        film.add_samples(pix, L.sum(axis=0), alpha, parts=L)
         if self._seed_rows is not None:
             self._seed_rows.append(self._seed_batch(cam, lig))
 
     def _accumulate(self, L: NDArray, pix: NDArray, lane: NDArray, s: NDArray, t: NDArray,
                     keep: NDArray, c: NDArray, light_sample: dict | None = None) -> None:
-        """L[lane[keep]] += c (rows of one lane may repeat across strategies)."""
+        """L[class, lane[keep]] += c, class = path_class(s + t − 2) (scattering vertices); rows
+        of one lane may repeat across strategies."""
         lane, s, t = lane[keep], s[keep], t[keep]
         if len(lane) == 0:
             return
         if self._seed_rows is not None:
             self._pending.append(dict(lane=lane, s=s, t=t, e=luminance(c), sample=light_sample))
+        cell = path_class(s + t - 2) * L.shape[1] + lane
+        flat = L.reshape(-1, 3)
         for ch in range(3):
-            L[:, ch] += np.bincount(lane, weights=c[:, ch], minlength=len(L))
+            flat[:, ch] += np.bincount(cell, weights=c[:, ch], minlength=len(flat))
         if self.strategy_images is not None:
             self._record_strategies(s, t, pix[lane], c)
 
@@ -661,7 +664,7 @@ class BDPTIntegrator(Integrator):
                              qs_fwd=lig.at("pdf_fwd", k, lane), no_s0=no_s0[lane])
         vis = self.scene.tracer.visible(p, ng, np.broadcast_to(camera.position, p.shape), None)
         raster, c, s, t = raster[vis], (c * w[:, None])[vis], s[vis], t[vis]
-        film.add_splats(raster, c)
+        film.add_splats(raster, c, path_class(s + t - 2))
         if self._seed_rows is not None:
             self._pending.append(dict(lane=lane[vis], s=s, t=t, raster=raster,
                                       e=luminance(c) / self.window.n_pixels))

@@ -219,7 +219,8 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
             view_layer=layer_name, export_seconds=exported.seconds, total_seconds=elapsed,
             export_stats=dict(exported.stats), warnings=list(dict.fromkeys(warnings))))
         try:
-            return sidecar.add_layer(scene, scene.frame_current, layer_name, report,
+            return sidecar.add_layer(scene, scene.frame_current, bool(self.is_animation),
+                                     layer_name, report,
                                      first_layer=not enabled or enabled[0] == layer_name)
         except OSError as exc:  # the image still renders; say why the file is missing
             warnings.append(f"statistics file not written: {exc}")

@@ -1,7 +1,7 @@
 """JSON statistics file written next to a rendered frame (``scene.ercuts.write_sidecar``).
 
-For the frame whose image goes to ``scene.render.frame_path(frame=f)`` (e.g.
-``out/shot_0007.exr``) the sidecar is ``out/shot_0007.ercuts.json``:
+For the frame whose image goes to ``out/shot_0007.exr`` (:func:`image_path`: Blender's
+naming for animations and for stills) the sidecar is ``out/shot_0007.ercuts.json``:
 
     {"format": "ercuts-sidecar", "version": 1, "frame": 7, "image": "<frame path>",
      "blender": "5.0.1", "layers": {"<view layer>": <layer report>, ...}}
@@ -31,9 +31,26 @@ SUFFIX = ".ercuts.json"
 _pending: dict[str, dict] = {}
 
 
-def sidecar_path(scene, frame: int) -> str:
-    """Absolute path of the sidecar of ``frame``."""
-    image = bpy.path.abspath(scene.render.frame_path(frame=frame))
+def image_path(scene, frame: int, animation: bool) -> str:
+    """Where Blender writes the frame's image (verified on 3.4.1 and 5.0.1).
+
+    Animations and command-line frames (``-f``/``-a``, ``is_animation``):
+    ``render.frame_path(frame=…)`` ('#' → frame digits, digits appended when there is no
+    '#'). Stills (``render.render(write_still=True)``): ``render.filepath`` as it is
+    (no frame substitution) plus the format's extension when ``use_file_extension``.
+    """
+    render = scene.render
+    if animation:
+        return bpy.path.abspath(render.frame_path(frame=frame))
+    path = bpy.path.abspath(render.filepath)
+    ext = render.file_extension
+    if render.use_file_extension and ext and not path.lower().endswith(ext.lower()):
+        path += ext
+    return path
+
+
+def sidecar_path(image: str) -> str:
+    """The sidecar of ``image``: its image extension replaced by ``.ercuts.json``."""
     stem, ext = os.path.splitext(image)
     if ext.lower() not in IMAGE_EXTENSIONS:
         stem = image
@@ -89,13 +106,15 @@ def write_atomic(path: str, data: dict) -> None:
         raise
 
 
-def add_layer(scene, frame: int, layer_name: str, report: dict, first_layer: bool) -> str:
+def add_layer(scene, frame: int, animation: bool, layer_name: str, report: dict,
+              first_layer: bool) -> str:
     """Add ``report`` for ``layer_name`` to the frame's sidecar and rewrite it; its path."""
-    path = sidecar_path(scene, frame)
+    image = image_path(scene, frame, animation)
+    path = sidecar_path(image)
     if first_layer or path not in _pending:
         _pending[path] = {"format": "ercuts-sidecar", "version": 1, "frame": int(frame),
-                          "image": bpy.path.abspath(scene.render.frame_path(frame=frame)),
-                          "blender": ".".join(str(v) for v in bpy.app.version), "layers": {}}
+                          "image": image, "blender": ".".join(str(v) for v in bpy.app.version),
+                          "layers": {}}
     _pending[path]["layers"][layer_name] = report
     write_atomic(path, _pending[path])
     return path

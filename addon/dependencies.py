@@ -9,7 +9,7 @@ Where each runtime gets them (shared docs ``blender.md`` §4.3):
 * **Blender 3.x, legacy zip**: ``ercuts_core`` is vendored in ``<package>/vendor`` (see
   :func:`use_vendored_core`); numpy, embreex, scipy and OpenEXR come from Blender's Python,
   from ``PYTHONPATH`` (Debian's Blender honours it), or from the user's
-  ``scripts/modules`` folder, which Blender puts on ``sys.path`` and where
+  ``scripts/addons/modules`` folder, which Blender puts on ``sys.path`` and where
   :func:`install_command` makes pip install them (the preferences' *Install Dependencies*).
 * **Development** (``import addon`` from the repository): the project's ``.venv``.
 
@@ -116,10 +116,15 @@ def is_extension() -> bool:
 
 
 def user_modules_dir() -> str:
-    """The user's ``scripts/modules`` folder (on ``sys.path`` in every Blender), created."""
+    """The user's ``scripts/addons/modules`` folder, created.
+
+    Blender puts it on ``sys.path`` at startup when it exists (``bpy.utils.refresh_script_paths``
+    adds ``<addons>/modules``; verified on 3.4.1 and 5.0.1), also under ``--factory-startup``,
+    which drops ``scripts/modules``.
+    """
     import bpy
 
-    return bpy.utils.user_resource("SCRIPTS", path="modules", create=True)
+    return bpy.utils.user_resource("SCRIPTS", path=os.path.join("addons", "modules"), create=True)
 
 
 def install_command(names, target: str, python: str | None = None) -> list[str]:

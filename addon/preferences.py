@@ -72,7 +72,7 @@ def draw_dependencies(layout, statuses) -> None:
 
 
 class ERCUTS_OT_install_dependencies(bpy.types.Operator):
-    """Install the missing Python modules with pip into your scripts/modules folder"""
+    """Install the missing Python modules with pip into your scripts/addons/modules folder"""
 
     bl_idname = "ercuts.install_dependencies"
     bl_label = "Install Dependencies"

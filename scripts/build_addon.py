@@ -160,15 +160,21 @@ def blender_ext_script(explicit: str | None) -> str:
              "--blender-ext PATH")
 
 
-def manifest_with_wheels(text: str, wheels: list[str]) -> str:
-    """The manifest with a top-level ``wheels = [...]`` inserted before its first table."""
-    entry = "wheels = [\n" + "".join(f'  "./wheels/{os.path.basename(w)}",\n' for w in wheels) + "]\n\n"
+def staged_manifest(text: str, wheels: list[str], platforms: list[str]) -> str:
+    """The manifest for the build: ``platforms`` set to the ones built, and a top-level
+    ``wheels = [...]`` inserted before its first table."""
     lines = text.splitlines(keepends=True)
+    listed = [i for i, line in enumerate(lines) if line.startswith("platforms")]
+    if len(listed) != 1:
+        sys.exit("build_addon: blender_manifest.toml needs one single-line 'platforms = [...]'")
+    lines[listed[0]] = "platforms = [" + ", ".join(f'"{p}"' for p in platforms) + "]\n"
+    entry = "wheels = [\n" + "".join(f'  "./wheels/{os.path.basename(w)}",\n' for w in wheels) + "]\n\n"
     first_table = next((i for i, line in enumerate(lines) if line.startswith("[")), len(lines))
     return "".join(lines[:first_table]) + entry + "".join(lines[first_table:])
 
 
-def build_extension(wheels: list[str], staging: str, dist: str, tool: str) -> list[str]:
+def build_extension(wheels: list[str], platforms: list[str], staging: str, dist: str,
+                    tool: str) -> list[str]:
     """Stage the extension source, build one zip per platform and validate each."""
     src = os.path.join(staging, "extension")
     shutil.rmtree(src, ignore_errors=True)
@@ -178,7 +184,7 @@ def build_extension(wheels: list[str], staging: str, dist: str, tool: str) -> li
         shutil.copy2(wheel, os.path.join(src, "wheels"))
     manifest = os.path.join(src, "blender_manifest.toml")
     with open(manifest, encoding="utf-8") as f:
-        text = manifest_with_wheels(f.read(), wheels)
+        text = staged_manifest(f.read(), wheels, platforms)
     with open(manifest, "w", encoding="utf-8") as f:
         f.write(text)
     before = set(glob.glob(os.path.join(dist, "*.zip")))
@@ -220,21 +226,26 @@ def main(argv=None) -> int:
     p.add_argument("--build-dir", default=os.path.join(ROOT, "build"),
                    help="wheel cache and staging (default build/)")
     p.add_argument("--blender-ext", help="path of Blender's bl_pkg/cli/blender_ext.py")
+    p.add_argument("--only", choices=("extension", "legacy"), help="build one kind of package")
     args = p.parse_args(argv)
 
     version = check_versions()
-    tool = blender_ext_script(args.blender_ext)
     staging = os.path.join(args.build_dir, "addon")
     os.makedirs(args.dist, exist_ok=True)
     for old in glob.glob(os.path.join(args.dist, f"{PACKAGE}-*.zip")):
-        os.remove(old)
+        if args.only is None or (args.only == "legacy") == old.endswith("-legacy.zip"):
+            os.remove(old)
 
-    wheels = [build_core_wheel(os.path.join(staging, "core_wheel"), staging)]
-    for platform in args.platforms:
-        for python in args.python:
-            wheels += download_wheels(platform, python, os.path.join(args.build_dir, "wheels"))
-    outputs = build_extension(wheels, staging, args.dist, tool)
-    outputs.append(build_legacy(version, staging, args.dist))
+    outputs = []
+    if args.only != "legacy":
+        tool = blender_ext_script(args.blender_ext)
+        wheels = [build_core_wheel(os.path.join(staging, "core_wheel"), staging)]
+        for platform in args.platforms:
+            for python in args.python:
+                wheels += download_wheels(platform, python, os.path.join(args.build_dir, "wheels"))
+        outputs += build_extension(wheels, args.platforms, staging, args.dist, tool)
+    if args.only != "extension":
+        outputs.append(build_legacy(version, staging, args.dist))
     for path in outputs:
         log(f"{os.path.relpath(path, os.getcwd())}  {os.path.getsize(path) / 2**20:.1f} MiB")
     return 0

@@ -87,13 +87,24 @@ def compositor_output_socket(tree):
     if COMPOSITOR_NODE_GROUP:
         if not any(item.item_type == "SOCKET" and item.in_out == "OUTPUT"
                    for item in tree.interface.items_tree):
-            tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+            new_group_socket(tree, "Image", "OUTPUT", "NodeSocketColor")
         node = next((n for n in tree.nodes if n.bl_idname == "NodeGroupOutput"), None)
         node = node or tree.nodes.new("NodeGroupOutput")
     else:
         node = next((n for n in tree.nodes if n.bl_idname == "CompositorNodeComposite"), None)
         node = node or tree.nodes.new("CompositorNodeComposite")
     return node.inputs[0]
+
+
+def new_group_socket(tree, name: str, in_out: str, socket_type: str) -> None:
+    """Add an input/output socket to a node group's interface (``in_out`` 'INPUT'/'OUTPUT').
+
+    4.0+: ``tree.interface.new_socket``; 3.x: ``tree.inputs/outputs.new(type, name)``.
+    """
+    if hasattr(tree, "interface"):
+        tree.interface.new_socket(name, in_out=in_out, socket_type=socket_type)
+    else:
+        (tree.inputs if in_out == "INPUT" else tree.outputs).new(socket_type, name)
 
 
 def oidn_available() -> bool:

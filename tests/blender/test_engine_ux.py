@@ -262,3 +262,38 @@ def test_no_sidecar_by_default(tmp_path):
     h.render_exr(tmp_path / "plain.exr")
     assert "sidecar" not in engine_module.last_render
     assert os.listdir(tmp_path) == ["plain.exr"]
+
+
+# --------------------------------------------------------------------------- instancing
+
+def _cube_instancer(points, z=1.0, size=0.4):
+    """A mesh of ``points`` whose geometry-nodes modifier puts a cube on every vertex."""
+    from addon import compat
+
+    ng = bpy.data.node_groups.new("Scatter", "GeometryNodeTree")
+    compat.new_group_socket(ng, "Geometry", "INPUT", "NodeSocketGeometry")
+    compat.new_group_socket(ng, "Geometry", "OUTPUT", "NodeSocketGeometry")
+    group_in = ng.nodes.new("NodeGroupInput")
+    group_out = ng.nodes.new("NodeGroupOutput")
+    cube = ng.nodes.new("GeometryNodeMeshCube")
+    cube.inputs["Size"].default_value = (size, size, size)
+    on_points = ng.nodes.new("GeometryNodeInstanceOnPoints")
+    ng.links.new(group_in.outputs[0], on_points.inputs["Points"])
+    ng.links.new(cube.outputs["Mesh"], on_points.inputs["Instance"])
+    ng.links.new(on_points.outputs["Instances"], group_out.inputs[0])
+    obj = h.mesh_object("Scatter", points, [], location=(0, 0, z))
+    obj.modifiers.new("Scatter", "NODES").node_group = ng
+    return obj
+
+
+def test_geometry_nodes_instances_rendered(tmp_path):
+    s = _scene(samples=1)
+    s.view_layers[0].use_pass_z = True
+    _cube_instancer([(-1, 0, 0), (1, 0, 0)], z=1.0, size=0.4)
+    ch = h.render_multilayer(tmp_path / "instances.exr")
+    depth = h.layer_pass(ch, "ViewLayer", "Depth", "Z")[..., 0]
+    tan_half = 18.0 / 50.0
+    for x in (-1.0, 1.0):  # cube tops at z = 1.2, i.e. 3.8 m below the camera
+        col = int(W / 2 * (1 + x / 3.8 / tan_half))
+        assert depth[H // 2, col] == pytest.approx(3.8 * np.hypot(1, x / 3.8), rel=0.01)
+    assert depth[H // 2, W // 2] == pytest.approx(5.0, rel=0.01)  # floor between them

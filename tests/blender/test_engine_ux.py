@@ -297,3 +297,18 @@ def test_geometry_nodes_instances_rendered(tmp_path):
         col = int(W / 2 * (1 + x / 3.8 / tan_half))
         assert depth[H // 2, col] == pytest.approx(3.8 * np.hypot(1, x / 3.8), rel=0.01)
     assert depth[H // 2, W // 2] == pytest.approx(5.0, rel=0.01)  # floor between them
+
+
+def test_transparent_film_alpha_is_coverage(tmp_path):
+    h.camera(location=(0, 0, 5))
+    h.plane("Small", size=1.0, material=h.diffuse("Grey"))  # covers the centre only
+    h.light("POINT", location=(0, 0, 3), energy=200)
+    h.world(color=(0.2, 0.3, 0.4), strength=1.0)
+    s = h.setup_render(W, H, samples=2)
+    s.ercuts.film_transparent = True
+    img = h.render_exr(tmp_path / "transparent.exr")
+    assert img[H // 2, W // 2, 3] == pytest.approx(1.0)  # the plane
+    assert img[0, 0, 3] == pytest.approx(0.0)  # the world
+    s.ercuts.film_transparent = False
+    img = h.render_exr(tmp_path / "opaque.exr")
+    assert img[0, 0, 3] == pytest.approx(1.0)

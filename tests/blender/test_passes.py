@@ -202,3 +202,25 @@ def test_composite_is_denoised_where_oidn_exists(tmp_path):
         assert composite.mean() == pytest.approx(noisy.mean(), rel=0.1)
     else:  # the Denoise node passes the image through
         np.testing.assert_allclose(composite, noisy, atol=1e-6)
+
+
+def test_passes_follow_border_crop(tmp_path):
+    """Border render with crop: every pass covers the border window at its frame position."""
+    s = _scene(samples=1)
+    s.view_layers[0].use_pass_z = True
+    s.view_layers[0].ercuts.use_pass_albedo = True
+    s.render.use_border = s.render.use_crop_to_border = True
+    s.render.border_min_x, s.render.border_max_x = 0.0, 0.5  # the left half: floor only
+    s.render.border_min_y, s.render.border_max_y = 0.25, 0.75
+    ch = h.render_multilayer(tmp_path / "border.exr")
+    x1, yb0, yb1 = int(0.5 * W), int(0.25 * H), int(0.75 * H)
+    depth = h.layer_pass(ch, "ViewLayer", "Depth", "Z")[..., 0]
+    assert depth.shape == (yb1 - yb0, x1)
+    # One sample per pixel lands anywhere in the pixel: allow half a pixel's depth change
+    # in x and in y.
+    fd = _floor_depth()
+    half_pixel = 0.5 * (np.abs(np.diff(fd, axis=0)).max() + np.abs(np.diff(fd, axis=1)).max())
+    np.testing.assert_allclose(depth, fd[H - yb1:H - yb0, :x1], atol=half_pixel + 1e-4)
+    albedo = h.layer_pass(ch, "ViewLayer", "Albedo", "RGB")
+    np.testing.assert_allclose(albedo.reshape(-1, 3), np.broadcast_to(FLOOR, (depth.size, 3)),
+                               atol=1e-5)

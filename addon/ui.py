@@ -49,11 +49,16 @@ def get_panels():
     return panels
 
 
-def _settings_layout(layout, context):
-    """``layout`` in Blender's property-split style, and ``scene.ercuts``."""
+def _split(layout):
+    """``layout`` in Blender's property-split style (labels left, no decorators)."""
     layout.use_property_split = True
     layout.use_property_decorate = False
-    return layout, context.scene.ercuts
+    return layout
+
+
+def _settings_layout(layout, context):
+    """``layout`` in Blender's property-split style, and ``scene.ercuts``."""
+    return _split(layout), context.scene.ercuts
 
 
 class ErcutsPanel:
@@ -210,22 +215,25 @@ class ERCUTS_OUTPUT_PT_statistics(ErcutsPanel, bpy.types.Panel):
         layout.prop(settings, "write_sidecar")
 
 
-class ERCUTS_VIEWLAYER_PT_passes(ErcutsPanel, bpy.types.Panel):
-    """Pass toggles of the active view layer (:mod:`.passes`)."""
+class ErcutsViewLayerPanel(ErcutsPanel):
+    """Mix-in: View Layer tab, Ercuts engine, a view layer in the context."""
 
-    bl_label = "Passes"
     bl_context = "view_layer"
 
     @classmethod
     def poll(cls, context):
         return getattr(context, "view_layer", None) is not None and super().poll(context)
 
+
+class ERCUTS_VIEWLAYER_PT_passes(ErcutsViewLayerPanel, bpy.types.Panel):
+    """Pass toggles of the active view layer (:mod:`.passes`)."""
+
+    bl_label = "Passes"
+
     def draw(self, context):
         from . import passes
 
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = _split(self.layout)
         view_layer = context.view_layer
         col = layout.column(heading="Include", align=True)
         for p in passes.PASSES:
@@ -233,21 +241,14 @@ class ERCUTS_VIEWLAYER_PT_passes(ErcutsPanel, bpy.types.Panel):
             col.prop(owner, p.toggle, text=p.name)
 
 
-class ERCUTS_VIEWLAYER_PT_override(ErcutsPanel, bpy.types.Panel):
+class ERCUTS_VIEWLAYER_PT_override(ErcutsViewLayerPanel, bpy.types.Panel):
     """Material (and on 5.0 world) override of the view layer, which the exporter honours."""
 
     bl_label = "Override"
-    bl_context = "view_layer"
     bl_options = {"DEFAULT_CLOSED"}
 
-    @classmethod
-    def poll(cls, context):
-        return getattr(context, "view_layer", None) is not None and super().poll(context)
-
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = _split(self.layout)
         view_layer = context.view_layer
         layout.prop(view_layer, "material_override")
         if "world_override" in view_layer.bl_rna.properties:

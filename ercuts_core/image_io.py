@@ -26,6 +26,8 @@ def atomic_path(path: str | os.PathLike, suffix: str):
     os.close(fd)
     try:
         yield tmp
+        with open(tmp, "rb+") as fh:      # on disk before the rename makes it visible
+            os.fsync(fh.fileno())
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

@@ -225,6 +225,11 @@ def med(rs, key):
     return float(np.median([r[key] for r in rs]))
 
 
+def med_stat(rs, key) -> float:
+    """Median of a numeric ``stats`` entry over runs (0 when absent)."""
+    return float(np.median([r.get("stats", {}).get(key, 0.0) or 0.0 for r in rs]))
+
+
 def bias_variance(rs: list[dict], ref: dict) -> tuple[float, float]:
     """Split the mean relMSE of K seeds into bias² and variance parts (relMSE units):
     E[relMSE(x_k)] = B + V, E[relMSE(mean_k x_k)] = B + V/K  ⇒  V = K/(K−1)·(first − second)."""
@@ -265,9 +270,19 @@ def why_missed(scene, budget, g, refs, budgets, worst_ratio=None) -> list[str]:
             notes.append("bias dominates, so more time alone will not close it: the VPL geometry "
                          f"clamp (clamp={_setting(er, 'clamp', 0.02)}) and the diffuse-VPL approximation "
                          "are the biased steps; a smaller clamp or bias compensation would")
-    energy = med(er, "energy")
-    if abs(energy - 1) > TARGET_ENERGY:
-        notes.append(f"ERCUTS's image energy is {energy:.3f} of the reference")
+    caps = [r["stats"].get("cut_cap_for_time_limit") for r in er]
+    caps = [c for c in caps if c]
+    if caps:
+        notes.append(f"to fit the budget the gather capped the cuts at {np.median(caps):.0f} light(s) in "
+                     f"{len(caps)} of {len(er)} runs (mean cut {med_stat(er, 'cut_size_mean'):.1f} instead of "
+                     "what the 2 % rule asks), so shading is blocky and biased: a faster gather or a longer "
+                     "budget closes this")
+    incomplete = sum(bool(r["stats"].get("gather_incomplete")) for r in er)
+    if incomplete:
+        notes.append(f"the gather did not finish in {incomplete} of {len(er)} runs (part of the image missing)")
+    clamped = med_stat(er, "clamped_energy")
+    if clamped and clamped > 0.01:
+        notes.append(f"the VPL clamp removed {100 * clamped:.1f} % of the energy (stats clamped_energy)")
     fl = ref["floor"]["relmse"]
     raw = med(er, "relmse")
     if raw > 0 and fl / raw > 0.2:
@@ -280,7 +295,7 @@ def why_missed(scene, budget, g, refs, budgets, worst_ratio=None) -> list[str]:
     slope = convergence_slope(g, scene, "ERCUTS", budgets)
     if slope is not None:
         notes.append(f"ERCUTS's relMSE falls ∝ t^{slope:.2f} between {min(budgets):g} s and {max(budgets):g} s")
-        if worst_ratio and slope < -0.05 and worst_ratio > 0:
+        if worst_ratio and slope < -0.05 and worst_ratio > 1:
             speed = worst_ratio ** (-1.0 / slope)
             notes.append(f"at that slope ERCUTS would need a {speed:.1f}× speed-up (same error in "
                          f"1/{speed:.1f} of the time) to meet the ratio target")

@@ -215,13 +215,13 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         from . import sidecar
 
         enabled = [vl.name for vl in scene.view_layers if vl.use]
+        first = scene.render.use_single_layer or not enabled or enabled[0] == layer_name
         report = sidecar.layer_report(result, settings, dict(
             view_layer=layer_name, export_seconds=exported.seconds, total_seconds=elapsed,
             export_stats=dict(exported.stats), warnings=list(dict.fromkeys(warnings))))
         try:
             return sidecar.add_layer(scene, scene.frame_current, bool(self.is_animation),
-                                     layer_name, report,
-                                     first_layer=not enabled or enabled[0] == layer_name)
+                                     layer_name, report, first_layer=first)
         except OSError as exc:  # the image still renders; say why the file is missing
             warnings.append(f"statistics file not written: {exc}")
             return None

@@ -41,6 +41,7 @@ finite under ``np.errstate(all="raise")`` for grazing (n·wo = 0), wi = ±wo, ro
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -68,9 +69,9 @@ def _dot(a: F64, b: F64) -> F64:
 
 
 def _div(num: F64, den: F64) -> F64:
-    """num/den where den > 0, else 0 (no floating-point warnings)."""
-    num, den = np.broadcast_arrays(np.asarray(num, np.float64), np.asarray(den, np.float64))
-    out = np.zeros(num.shape, np.float64)
+    """num/den where den > 0, else 0 (no floating-point warnings); broadcasts like ``/``."""
+    num, den = np.asarray(num, np.float64), np.asarray(den, np.float64)
+    out = np.zeros(np.broadcast_shapes(num.shape, den.shape), np.float64)
     np.divide(num, den, out=out, where=den > 0.0)
     return out
 
@@ -83,6 +84,37 @@ def _normalize(v: F64) -> F64:
 
 def _as3(v: ArrayLike) -> F64:
     return np.asarray(v, dtype=np.float64).reshape(-1, 3)
+
+
+def _oriented_normals(ns: ArrayLike, ng: ArrayLike) -> tuple[F64, F64]:
+    """Unit (ns, ng), ns put on ng's side (inverted custom normals); zero rows stay zero."""
+    ng = _normalize(_as3(ng))
+    ns = _normalize(_as3(ns))
+    return np.where((_dot(ns, ng) < 0.0)[:, None], -ns, ns), ng
+
+
+def _lobe_params(base_color: ArrayLike, roughness: ArrayLike, metallic: ArrayLike,
+                 specular: ArrayLike, n: int) -> dict[str, NDArray]:
+    """Per-lane lobe weights of :class:`Bsdf` from Principled parameters broadcast to n lanes.
+
+    Returns the fields kd, f0, f90 (n, 3), alpha, p_spec (n,), is_diffuse (n,) bool
+    (formulas in the module docstring).
+    """
+    base = np.broadcast_to(np.clip(np.asarray(base_color, np.float64), 0.0, 1.0), (n, 3))
+    rough = np.broadcast_to(np.clip(np.asarray(roughness, np.float64), 0.0, 1.0), (n,))
+    metal = np.broadcast_to(np.clip(np.asarray(metallic, np.float64), 0.0, 1.0), (n,))
+    spec = np.broadcast_to(np.asarray(specular, np.float64), (n,))
+    f0_d = np.clip(0.08 * spec, 0.0, 1.0)
+    m = metal[:, None]
+    kd = (1.0 - m) * (1.0 - f0_d)[:, None] * base
+    f0 = (1.0 - m) * f0_d[:, None] + m * base
+    f90 = (1.0 - m) * f0_d[:, None] + m
+    # Lobe-selection probability p_spec = s/(s + d)
+    s = (1.0 - metal) * f0_d + metal
+    d = (1.0 - metal) * (1.0 - f0_d) * luminance(base)
+    p_spec = np.clip(_div(s, s + d), 0.0, 1.0)
+    return {"kd": kd, "f0": f0, "f90": f90, "alpha": np.maximum(rough * rough, ALPHA_MIN),
+            "p_spec": p_spec, "is_diffuse": s <= 0.0}
 
 
 # ---------------------------------------------------------------------------------------
@@ -202,38 +234,24 @@ class Bsdf:
             specular: (N,) "Specular IOR Level" >= 0 (F0_d = 0.08·specular, clipped to 1).
             ns, ng: (N, 3) shading / geometric normals (renormalized; zero rows give f = 0).
         """
-        ng = _normalize(_as3(ng))
-        ns = _normalize(_as3(ns))
-        # Put the shading normal on the geometric normal's side (inverted custom normals)
-        ns = np.where((_dot(ns, ng) < 0.0)[:, None], -ns, ns)
-        n = ng.shape[0]
-        base = np.broadcast_to(np.clip(np.asarray(base_color, np.float64), 0.0, 1.0), (n, 3))
-        rough = np.broadcast_to(np.clip(np.asarray(roughness, np.float64), 0.0, 1.0), (n,))
-        metal = np.broadcast_to(np.clip(np.asarray(metallic, np.float64), 0.0, 1.0), (n,))
-        spec = np.broadcast_to(np.asarray(specular, np.float64), (n,))
-        f0_d = np.clip(0.08 * spec, 0.0, 1.0)
-        m = metal[:, None]
-        # Lobe weights (see module docstring)
-        kd = (1.0 - m) * (1.0 - f0_d)[:, None] * base
-        f0 = (1.0 - m) * f0_d[:, None] + m * base
-        f90 = (1.0 - m) * f0_d[:, None] + m
-        # Lobe-selection probability p_spec = s/(s + d)
-        s = (1.0 - metal) * f0_d + metal
-        d = (1.0 - metal) * (1.0 - f0_d) * luminance(base)
-        p_spec = np.clip(_div(s, s + d), 0.0, 1.0)
-        return cls(ns=ns, ng=ng, kd=kd, f0=f0, f90=f90,
-                   alpha=np.maximum(rough * rough, ALPHA_MIN), p_spec=p_spec,
-                   is_diffuse=s <= 0.0)
+        ns, ng = _oriented_normals(ns, ng)
+        lobes = _lobe_params(base_color, roughness, metallic, specular, ng.shape[0])
+        return cls(ns=ns, ng=ng, **lobes)
 
     @classmethod
     def from_table(cls, table: MaterialTable, mat_idx: ArrayLike, ns: ArrayLike,
                    ng: ArrayLike) -> Bsdf:
-        """Gather per-lane parameters from ``table`` rows ``mat_idx`` (N,) int."""
+        """Gather per-lane parameters from ``table`` rows ``mat_idx`` (N,) int.
+
+        The lobe parameters are computed once per material row and gathered (the same
+        arithmetic as :meth:`from_params` on the gathered rows, so bit-identical).
+        """
         idx = np.asarray(mat_idx, dtype=np.int64).reshape(-1)
-        return cls.from_params(table.base_color[idx].astype(np.float64),
-                               table.roughness[idx].astype(np.float64),
-                               table.metallic[idx].astype(np.float64),
-                               table.specular[idx].astype(np.float64), ns, ng)
+        ns, ng = _oriented_normals(ns, ng)
+        rows = _lobe_params(table.base_color.astype(np.float64), table.roughness.astype(np.float64),
+                            table.metallic.astype(np.float64), table.specular.astype(np.float64),
+                            len(table.roughness))
+        return cls(ns=ns, ng=ng, **{k: v[idx] for k, v in rows.items()})
 
     def __len__(self) -> int:
         return int(self.alpha.shape[0])
@@ -245,6 +263,15 @@ class Bsdf:
                     f90=self.f90[sel], alpha=self.alpha[sel], p_spec=self.p_spec[sel],
                     is_diffuse=self.is_diffuse[sel])
 
+    @cached_property
+    def all_diffuse(self) -> bool:
+        """True when no lane has a specular lobe: eval/pdf/sample take the Lambert-only path.
+
+        Exact, not an approximation: a diffuse lane has F0 = F90 = 0 and p_spec = 0, so the
+        general formulas reduce to f = kd/π, pdf = cos/π bit for bit (tests/test_bsdf.py).
+        """
+        return bool(self.is_diffuse.all())
+
     # -- evaluation -------------------------------------------------------------------
 
     def _flipped_normals(self, wo: F64) -> tuple[F64, F64]:
@@ -252,16 +279,21 @@ class Bsdf:
         flip = (_dot(wo, self.ng) < 0.0)[:, None]
         return np.where(flip, -self.ns, self.ns), np.where(flip, -self.ng, self.ng)
 
-    def _eval_pdf(self, wo: F64, wi: F64) -> tuple[F64, F64, F64, B]:
-        """Shared core of eval/pdf/sample.
+    def _eval_pdf(self, wo: F64, wi: F64, flipped: tuple[F64, F64] | None = None
+                  ) -> tuple[F64, F64, F64, B]:
+        """Shared core of eval/pdf/sample (``flipped``: this call's ``_flipped_normals(wo)``).
 
         Returns:
             f (N, 3) [sr⁻¹], pdf (N,) [sr⁻¹], cos_i = ns·wi (N,), valid (N,) bool.
         """
-        ns, ng = self._flipped_normals(wo)
+        ns, ng = self._flipped_normals(wo) if flipped is None else flipped
         cos_o, cos_i = _dot(wo, ns), _dot(wi, ns)
         valid = ((cos_o > COS_EPS) & (cos_i > COS_EPS)
                  & (_dot(wo, ng) > COS_EPS) & (_dot(wi, ng) > COS_EPS))
+        if self.all_diffuse:
+            # Lambert only: f = kd/π, pdf = cos_i/π on the valid set (see all_diffuse).
+            f = np.where(valid[:, None], self.kd * INV_PI, 0.0)
+            return f, np.where(valid, cos_i * INV_PI, 0.0), cos_i, valid
         # Half vector terms; wo + wi is computed the same way for (wo, wi) and (wi, wo)
         h_len = np.sqrt(_dot(wo + wi, wo + wi))
         cos_h = np.clip(_div(cos_o + cos_i, h_len), 0.0, 1.0)
@@ -289,6 +321,12 @@ class Bsdf:
         with np.errstate(under="ignore"):
             return self._eval_pdf(_as3(wo), _as3(wi))[1]
 
+    def eval_pdf(self, wo: ArrayLike, wi: ArrayLike) -> tuple[F64, F64]:
+        """``(eval(wo, wi), pdf(wo, wi))`` from one evaluation: (N, 3) and (N,) [sr⁻¹]."""
+        with np.errstate(under="ignore"):
+            f, pdf, _, _ = self._eval_pdf(_as3(wo), _as3(wi))
+        return f, pdf
+
     def sample(self, wo: ArrayLike, u: ArrayLike) -> BsdfSample:
         """Importance-sample wi given wo.
 
@@ -301,18 +339,20 @@ class Bsdf:
         wo = _as3(wo)
         u = np.asarray(u, dtype=np.float64).reshape(-1, 3)
         with np.errstate(under="ignore"):
-            ns, _ = self._flipped_normals(wo)
+            flipped = self._flipped_normals(wo)
+            ns = flipped[0]
             t, b = coordinate_system(ns)
-            wo_l = to_local(wo, t, b, ns)
-            # Lanes with wo under the shading horizon are invalid; sample them about +z
-            wo_l = np.where((wo_l[:, 2] > COS_EPS)[:, None], wo_l, [0.0, 0.0, 1.0])
-            # Specular: reflect wo about a visible GGX normal; diffuse: cosine lobe
-            m = sample_ggx_vndf(wo_l, self.alpha, u[:, 1:3])
-            wi_spec = 2.0 * _dot(wo_l, m)[:, None] * m - wo_l
-            wi_diff = sample_cosine_hemisphere(u[:, 1:3])
-            choose_spec = u[:, 0] < self.p_spec
-            wi = _normalize(to_world(np.where(choose_spec[:, None], wi_spec, wi_diff), t, b, ns))
-            f, pdf, cos_i, valid = self._eval_pdf(wo, wi)
+            wi_l = sample_cosine_hemisphere(u[:, 1:3])
+            if not self.all_diffuse:  # (all diffuse: p_spec = 0, the cosine lobe is always chosen)
+                wo_l = to_local(wo, t, b, ns)
+                # Lanes with wo under the shading horizon are invalid; sample them about +z
+                wo_l = np.where((wo_l[:, 2] > COS_EPS)[:, None], wo_l, [0.0, 0.0, 1.0])
+                # Specular: reflect wo about a visible GGX normal; diffuse: cosine lobe
+                m = sample_ggx_vndf(wo_l, self.alpha, u[:, 1:3])
+                wi_spec = 2.0 * _dot(wo_l, m)[:, None] * m - wo_l
+                wi_l = np.where((u[:, 0] < self.p_spec)[:, None], wi_spec, wi_l)
+            wi = _normalize(to_world(wi_l, t, b, ns))
+            f, pdf, cos_i, valid = self._eval_pdf(wo, wi, flipped)
             valid &= pdf > 0.0
             weight = np.where(valid[:, None], f * _div(np.abs(cos_i), pdf)[:, None], 0.0)
         return BsdfSample(wi=wi, f=f, pdf=np.where(valid, pdf, 0.0), weight=weight,

@@ -83,9 +83,10 @@ def _nee_seeds(scene, base, lanes, surf, wo, bsdf, beta, depth, rng, out_paths, 
     n = len(lanes)
     ls = lights.illuminate(surf.p, rng.random(n), rng.random((n, 2)))
     kind = lights.kind[ls.light]
-    f = bsdf.eval(wo, ls.wi) * np.abs(np.einsum("ij,ij->i", surf.ns, ls.wi))[:, None]
+    f, pdf_bsdf = bsdf.eval_pdf(wo, ls.wi)
+    f = f * np.abs(np.einsum("ij,ij->i", surf.ns, ls.wi))[:, None]
     nee_only = (kind == POINT) | (kind == SUN) | (kind == AREA)
-    w = np.where(nee_only, 1.0, power_heuristic(ls.pdf_w, bsdf.pdf(wo, ls.wi)))
+    w = np.where(nee_only, 1.0, power_heuristic(ls.pdf_w, pdf_bsdf))
     C = beta * f * ls.Li / np.where(ls.valid, ls.pdf_w, 1.0)[:, None] * w[:, None]
     ok = ls.valid & (C.max(axis=1) > 0)
     if not ok.any():

@@ -342,3 +342,59 @@ def test_bsdf_max_value():
     f = Bsdf.from_table(table, np.zeros(5000, int), np.tile(up[0], (5000, 1)),
                         np.tile(up[0], (5000, 1))).eval(wo, wi)
     assert np.all(f <= bound[0] * (1 + 1e-9))
+
+
+# ---------------------------------------------------------------------------------------
+# Fast paths (bsdf.py: Lambert-only batches, eval_pdf, per-material lobe parameters)
+# ---------------------------------------------------------------------------------------
+
+def _diffuse_and_mixed(n, seed):
+    """n diffuse lanes (random colours/roughness, specular = metallic = 0, tilted ns), alone
+    and with one glossy lane appended (which forces the general GGX code on every lane)."""
+    rng = np.random.default_rng(seed)
+    base, rough = rng.random((n, 3)), rng.random(n)
+    ns = np.tile(direction(np.cos(0.3), 0.7), (n, 1))
+    ng = np.tile(NORMAL, (n, 1))
+    diffuse = Bsdf.from_params(base, rough, np.zeros(n), np.zeros(n), ns, ng)
+    mixed = Bsdf.from_params(np.vstack([base, [0.5, 0.5, 0.5]]), np.r_[rough, 0.3], np.zeros(n + 1),
+                             np.r_[np.zeros(n), 0.5], np.vstack([ns, NORMAL]), np.vstack([ng, NORMAL]))
+    return diffuse, mixed
+
+
+def test_diffuse_fast_path_equals_general_path():
+    n = 20_000
+    diffuse, mixed = _diffuse_and_mixed(n, 7)
+    assert diffuse.all_diffuse and not mixed.all_diffuse
+    wo, wi = _random_pairs(n + 1, 8)
+    f_fast, pdf_fast = diffuse.eval_pdf(wo[:n], wi[:n])
+    f_gen, pdf_gen = mixed.eval_pdf(wo, wi)
+    assert np.count_nonzero(pdf_fast) > n // 10 and np.count_nonzero(pdf_fast == 0) > n // 10
+    assert np.allclose(f_fast, f_gen[:n], rtol=0, atol=1e-12)
+    assert np.allclose(pdf_fast, pdf_gen[:n], rtol=0, atol=1e-12)
+    u = np.random.default_rng(9).random((n + 1, 3))
+    s_fast, s_gen = diffuse.sample(wo[:n], u[:n]), mixed.sample(wo, u)
+    for name in ("wi", "f", "pdf", "weight", "valid"):
+        a, b = getattr(s_fast, name), getattr(s_gen, name)[:n]
+        assert np.allclose(a, b, rtol=0, atol=1e-12), name
+    assert s_fast.valid.sum() > n // 4
+
+
+def test_eval_pdf_equals_eval_and_pdf():
+    for material in ("diffuse", "glossy_0.3", "metal_0.3"):
+        wo, wi = _random_pairs(5000, 11)
+        bsdf = make_bsdf(material, 5000, ns=direction(np.cos(0.2), 1.0))
+        f, pdf = bsdf.eval_pdf(wo, wi)
+        assert np.array_equal(f, bsdf.eval(wo, wi)) and np.array_equal(pdf, bsdf.pdf(wo, wi))
+
+
+def test_from_table_is_bit_identical_to_from_params_on_the_gathered_rows():
+    table = _table()
+    idx = np.random.default_rng(12).integers(0, table.n_materials, 3000)
+    n = idx.size
+    ns, ng = np.tile(direction(np.cos(0.2), 1.0), (n, 1)), np.tile(NORMAL, (n, 1))
+    a = Bsdf.from_table(table, idx, ns, ng)
+    b = Bsdf.from_params(table.base_color[idx].astype(np.float64), table.roughness[idx].astype(np.float64),
+                         table.metallic[idx].astype(np.float64), table.specular[idx].astype(np.float64),
+                         ns, ng)
+    for field in dataclasses.fields(Bsdf):
+        assert np.array_equal(getattr(a, field.name), getattr(b, field.name)), field.name

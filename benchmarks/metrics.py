@@ -40,3 +40,16 @@ def reference_floor(r: np.ndarray, var: np.ndarray) -> dict[str, float]:
     variance ``var`` of the reference mean; independent of the test image)."""
     return dict(relmse=float(np.mean(var / (np.asarray(r, np.float64) ** 2 + EPS))),
                 mse=float(np.mean(var)))
+
+
+def hdr_flip(x: np.ndarray, r: np.ndarray) -> float | None:
+    """Mean HDR-FLIP (NVlabs FLIP, linear-sRGB input, default 67 ppd) of ``x`` against ``r``;
+    None when the optional ``flip-evaluator`` package is not installed."""
+    try:
+        import flip_evaluator
+    except ImportError:
+        return None
+    _, mean, _ = flip_evaluator.evaluate(np.ascontiguousarray(np.maximum(r, 0), np.float32),
+                                         np.ascontiguousarray(np.maximum(x, 0), np.float32),
+                                         "HDR", applyMagma=False)
+    return float(mean)

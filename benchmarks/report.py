@@ -209,6 +209,26 @@ def evaluate(runs: list[dict], refs: dict) -> None:
         r["rmse"] = metrics.rmse(x, g)
         r["smape"] = metrics.smape(x, g)
         r["energy"] = metrics.energy_ratio(x, g)
+        r["flip"] = _cached_flip(r, ref)
+
+
+def _cached_flip(run: dict, ref: dict) -> float | None:
+    """HDR-FLIP of a run (seconds each, so cached per run and reference version in
+    ``runs/<scene>/flip_cache.json``); None without the optional flip-evaluator package."""
+    path = os.path.join(RUNS, run["scene"], "flip_cache.json")
+    key = f"{run['engine']}_{run['budget']:g}s_seed{run['seed']}|{run.get('finished')}|{ref['info'].get('written')}"
+    cache = {}
+    if os.path.exists(path):
+        with open(path) as fh:
+            cache = json.load(fh)
+    if key not in cache:
+        value = metrics.hdr_flip(run["image"], ref["image"])
+        if value is None:
+            return None
+        cache[key] = value
+        with open(path, "w") as fh:
+            json.dump(cache, fh, indent=0)
+    return cache[key]
 
 
 def groups(runs):
@@ -379,8 +399,8 @@ def target_lines(g, refs, scenes, budgets) -> list[str]:
 
 
 def scene_table(s, g, budgets, engines) -> list[str]:
-    lines = [f"| engine | budget | relMSE median (min–max) | floor-corrected | RMSE | SMAPE | energy | wall s | samples |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = [f"| engine | budget | relMSE median (min–max) | floor-corrected | RMSE | SMAPE | HDR-FLIP | energy | wall s | samples |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for b in budgets:
         for e in engines:
             rs = g.get((s, e, b))
@@ -396,9 +416,15 @@ def scene_table(s, g, budgets, engines) -> list[str]:
                 st = rs[0]["stats"]
                 spp = f"{st.get('vpls', '?')} VPLs, cut {st.get('cut_size_mean', 0):.0f}"
             lines.append(f"| {e} | {b:g} s | {_spread(rs, 'relmse')} | {med(rs, 'relmse_corr'):.4f} | "
-                         f"{med(rs, 'rmse'):.4f} | {med(rs, 'smape'):.4f} | {med(rs, 'energy'):.3f} | "
+                         f"{med(rs, 'rmse'):.4f} | {med(rs, 'smape'):.4f} | {_flip_cell(rs)} | "
+                         f"{med(rs, 'energy'):.3f} | "
                          f"{med(rs, 'wall'):.1f} | {spp} |")
     return lines
+
+
+def _flip_cell(rs) -> str:
+    v = [r["flip"] for r in rs if r.get("flip") is not None]
+    return f"{np.median(v):.4f}" if v else "–"
 
 
 def plot_convergence(g, scenes, engines, budgets, path) -> None:
@@ -478,6 +504,13 @@ def plot_side_by_side(s, g, ref, engines, budget, path) -> tuple[int, int] | Non
     return y, x
 
 
+def _flip_note(runs) -> str:
+    if any(r.get("flip") is not None for r in runs):
+        return "HDR-FLIP: mean of NVlabs FLIP (package flip-evaluator, HDR mode, 67 ppd) against the reference."
+    return ("HDR-FLIP: not computed (the optional package `flip-evaluator` is not installed; "
+            "`.venv/bin/pip install flip-evaluator` adds the column).")
+
+
 def _git_commit() -> str:
     try:
         return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
@@ -525,7 +558,7 @@ def write_report(args) -> str:
              "Metrics against the Cycles reference (per pixel and channel, no firefly removal): relMSE = "
              "mean((x−r)²/(r²+0.01)); RMSE; SMAPE = mean(|x−r|/(|x|+|r|+0.001)); energy = mean(x)/mean(r). "
              "*Floor-corrected* relMSE subtracts the reference's own expected contribution "
-             "mean(var_ref/(r²+0.01)). HDR-FLIP: not computed (`flip-evaluator` is not a dependency).", ""]
+             "mean(var_ref/(r²+0.01)). " + _flip_note(runs), ""]
     lines += target_lines(g, refs, scenes, budgets) + [""]
     conv = "report_convergence.png"
     plot_convergence(g, scenes, engines, budgets, os.path.join(RESULTS, conv))

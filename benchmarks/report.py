@@ -128,6 +128,10 @@ def plan(args) -> list[tuple[str, str, float, int]]:
     for spec in args.extra or []:
         b, _, names = spec.partition(":")
         for s in names.split(","):
+            if s not in SCENES:
+                raise SystemExit(f"report: unknown scene {s!r} in --extra {spec!r}")
+            if s not in args.scenes:
+                continue
             jobs += [(s, e, float(b), k) for k in range(args.seeds) for e in args.engines]
     return jobs
 
@@ -432,6 +436,7 @@ def plot_convergence(g, scenes, engines, budgets, path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, NullFormatter
 
     n = len(scenes)
     fig, axes = plt.subplots(1, n, figsize=(3.4 * n, 3.2), squeeze=False)
@@ -448,6 +453,9 @@ def plot_convergence(g, scenes, engines, budgets, path) -> None:
             ax.errorbar(t, m, yerr=[lo, hi], marker="o", capsize=3, label=e)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ax.set_xticks(budgets)
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_title(s)
         ax.set_xlabel("wall time (s)")
         ax.grid(True, which="both", alpha=0.3)

@@ -10,13 +10,15 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$root/scripts/setup_env.sh"
 cd "$root"
 status=0
+# blender first: step 1's tests/test_cli_batch.py runs the binary too.
+if [ "${ERCUTS_SKIP_BLENDER34:-0}" != 1 ] && ! command -v blender >/dev/null 2>&1 \
+    && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+  echo "test.sh: installing Debian's blender for the Blender 3.4 add-on tests"
+  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq blender >/dev/null) \
+    || echo "test.sh: could not install blender"
+fi
 "$root/.venv/bin/python" -m pytest "$@" || status=$?
 if [ "${ERCUTS_SKIP_BLENDER34:-0}" != 1 ]; then
-  if ! command -v blender >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-    echo "test.sh: installing Debian's blender for the Blender 3.4 add-on tests"
-    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq blender >/dev/null) \
-      || echo "test.sh: could not install blender"
-  fi
   if command -v blender >/dev/null 2>&1; then
     echo "test.sh: add-on tests inside $(blender --version 2>/dev/null | head -n 1)"
     PYTHONPATH="$root/.venv/lib/python3.11/site-packages:$root" \

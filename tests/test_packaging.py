@@ -75,6 +75,7 @@ def test_extension_zip_contents(dist):
     assert (m["id"], m["type"], m["version"], m["blender_version_min"]) == ("ercuts", "add-on", VERSION, "4.2.0")
     assert m["tags"] == ["Render"] and all(x.startswith("SPDX:") for x in m["license"])
     assert m["platforms"] == ["linux-x64"]
+    assert set(m["permissions"]) == {"files"}  # the statistics sidecar writes next to frames
     wheels = [w.removeprefix("./") for w in m["wheels"]]
     assert set(wheels) == {n for n in names if n.endswith(".whl")}  # listed == shipped
     for prefix in ("ercuts_core-", "embreex-", "scipy-", "openexr-"):

@@ -128,7 +128,8 @@ class Film:
         self._add(self.aov_sum[name], pix, values)
 
     def merge(self, other: "Film") -> None:
-        """Add a film of the same window holding one pass."""
+        """Add a film of the same window holding one pass (a fresh film filled by batches) or
+        ``other.passes_done`` merged passes."""
         self.color += other.color
         self.splat += other.splat
         self.alpha += other.alpha
@@ -138,7 +139,7 @@ class Film:
         for k, v in other.aov_sum.items():
             self.aov_sum[k] = self.aov_sum.get(k, 0) + v
         self.nonfinite += other.nonfinite
-        self.passes_done += 1
+        self.passes_done += max(other.passes_done, 1)
 
     def image(self) -> NDArray[np.float32]:
         """(h, w, 4) float32 linear RGBA, top row first: mean camera estimate + splats."""

@@ -46,6 +46,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .arrays import take_rows
 from .description import MaterialTable
 from .sampling import (INV_PI, coordinate_system, luminance, sample_cosine_hemisphere,
                        to_local, to_world)
@@ -251,7 +252,7 @@ class Bsdf:
         rows = _lobe_params(table.base_color.astype(np.float64), table.roughness.astype(np.float64),
                             table.metallic.astype(np.float64), table.specular.astype(np.float64),
                             len(table.roughness))
-        return cls(ns=ns, ng=ng, **{k: v[idx] for k, v in rows.items()})
+        return cls(ns=ns, ng=ng, **{k: take_rows(v, idx) for k, v in rows.items()})
 
     def __len__(self) -> int:
         return int(self.alpha.shape[0])
@@ -259,9 +260,7 @@ class Bsdf:
     def subset(self, mask_or_idx: ArrayLike) -> Bsdf:
         """The lanes selected by a (N,) bool mask or an integer index array."""
         sel = np.asarray(mask_or_idx)
-        return Bsdf(ns=self.ns[sel], ng=self.ng[sel], kd=self.kd[sel], f0=self.f0[sel],
-                    f90=self.f90[sel], alpha=self.alpha[sel], p_spec=self.p_spec[sel],
-                    is_diffuse=self.is_diffuse[sel])
+        return Bsdf(**{f: take_rows(getattr(self, f), sel) for f in _FIELDS})
 
     @cached_property
     def all_diffuse(self) -> bool:
@@ -364,6 +363,10 @@ class Bsdf:
         Not the directional albedo: ignores Fresnel growth at grazing and Smith losses.
         """
         return np.clip(self.kd + self.f0, 0.0, 1.0)
+
+
+#: The per-lane array fields of :class:`Bsdf` (what ``subset`` selects).
+_FIELDS = ("ns", "ng", "kd", "f0", "f90", "alpha", "p_spec", "is_diffuse")
 
 
 def bsdf_max_value(table: MaterialTable, mat_idx: ArrayLike) -> F64:

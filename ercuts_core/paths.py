@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .arrays import take_rows
 from .bsdf import Bsdf
 from .lights import AREA, ENV, POINT, SUN, TRI
 from .scene import BuiltScene
@@ -72,8 +73,8 @@ class PathBatch:
         return self.p.shape[1]
 
     def take(self, idx) -> "PathBatch":
-        return PathBatch(self.raster[idx], self.p[idx], self.ng[idx], self.ns[idx], self.mat[idx],
-                         self.k[idx], self.light[idx])
+        return PathBatch(*(take_rows(a, idx) for a in (self.raster, self.p, self.ng, self.ns, self.mat,
+                                                       self.k, self.light)))
 
     def put(self, idx, other: "PathBatch") -> None:
         """Overwrite paths ``idx`` with ``other`` (in place)."""

@@ -136,9 +136,12 @@ def sample_uniform_disk_concentric(u: ArrayLike) -> F64:
     x_major = np.abs(ux) > np.abs(uy)
     # Wedge |x| > |y|: r = x, θ = π/4·y/x; otherwise r = y, θ = π/2 − π/4·x/y
     r = np.where(x_major, ux, uy)
-    theta = np.where(x_major, PI_OVER_4 * _safe_div(uy, ux),
-                     PI_OVER_2 - PI_OVER_4 * _safe_div(ux, uy))
-    return np.stack([r * np.cos(theta), r * np.sin(theta)], axis=1)
+    q = PI_OVER_4 * _safe_div(np.where(x_major, uy, ux), r)   # one division for both wedges
+    theta = np.where(x_major, q, PI_OVER_2 - q)
+    out = np.empty((len(r), 2))
+    np.multiply(r, np.cos(theta), out=out[:, 0])
+    np.multiply(r, np.sin(theta), out=out[:, 1])
+    return out
 
 
 def invert_uniform_disk_concentric(p: ArrayLike) -> F64:

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .arrays import take_rows
 from .camera import Camera
 from .description import SceneDescription
 from .lights import LightSet
@@ -40,8 +41,9 @@ class Surface:
     t: NDArray
 
     def subset(self, idx) -> "Surface":
-        return Surface(self.valid[idx], self.p[idx], self.ng[idx], self.ns[idx], self.prim[idx],
-                       self.mat[idx], self.t[idx])
+        """The interactions selected by an index array or a boolean mask (N,)."""
+        return Surface(*(take_rows(a, idx) for a in (self.valid, self.p, self.ng, self.ns, self.prim,
+                                                     self.mat, self.t)))
 
 
 class BuiltScene:
@@ -80,19 +82,19 @@ class BuiltScene:
             z = np.zeros((n, 3))
             return Surface(valid, z, z, z, hit.prim, np.zeros(n, np.int64), hit.t)
         b = np.stack([1.0 - hit.u - hit.v, hit.u, hit.v], axis=1)                        # (N, 3)
-        p = np.einsum("nk,nkj->nj", b, self.tri_p[prim])
-        ng = self.tri_ng[prim]
+        p = np.einsum("nk,nkj->nj", b, take_rows(self.tri_p, prim))
+        ng = take_rows(self.tri_ng, prim)
         ns = ng
         if self.has_normals:
-            interp = np.einsum("nk,nkj->nj", b, self.tri_vn[prim])
+            interp = np.einsum("nk,nkj->nj", b, take_rows(self.tri_vn, prim))
             ln = np.linalg.norm(interp, axis=1)
-            use = self.tri_smooth[prim] & (ln > 1e-8)
+            use = take_rows(self.tri_smooth, prim) & (ln > 1e-8)
             interp = interp / np.maximum(ln, 1e-300)[:, None]
             # Keep the shading normal on the geometric normal's side.
             flip = np.einsum("ij,ij->i", interp, ng) < 0
             interp[flip] *= -1.0
             ns = np.where(use[:, None], interp, ng)
-        return Surface(valid, p, ng, ns, hit.prim, self.tri_mat[prim], hit.t)
+        return Surface(valid, p, ng, ns, hit.prim, take_rows(self.tri_mat, prim), hit.t)
 
     def emission(self, surf: Surface) -> NDArray:
         """(N, 3) radiance emitted by the hit triangles (two-sided; 0 for misses)."""

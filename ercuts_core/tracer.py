@@ -81,7 +81,9 @@ class Tracer:
     # ------------------------------------------------------------------ offsets
     def epsilon(self, p: NDArray) -> NDArray:
         """(N,) offset distance for points ``p`` (N, 3): absolute floor + float32 ulp part."""
-        return np.maximum(self.eps_abs, 64.0 * _F32_ULP * np.abs(p).max(axis=-1))
+        a = np.abs(p)
+        # max over the 3 columns, elementwise (np.max(axis=-1) is ~20× slower on (N, 3))
+        return np.maximum(self.eps_abs, 64.0 * _F32_ULP * np.maximum(np.maximum(a[:, 0], a[:, 1]), a[:, 2]))
 
     def offset(self, p: NDArray, ng: NDArray, d: NDArray) -> NDArray:
         """Move surface points ``p`` off their surface toward the side ``d`` points to.
@@ -165,7 +167,7 @@ class Tracer:
         o0 = p0 if ng0 is None else self.offset(p0, ng0, d)
         o1 = p1 if ng1 is None else self.offset(p1, ng1, -d)
         seg = o1 - o0
-        dist = np.linalg.norm(seg, axis=1)
+        dist = np.sqrt(np.einsum("ij,ij->i", seg, seg))
         ok = dist > 0
         dirs = np.where(ok[:, None], seg / np.where(ok, dist, 1.0)[:, None], 0.0)
         dirs[~ok, 2] = 1.0

@@ -96,8 +96,10 @@ def _clean_mesh(desc: SceneDescription, issues: list[Issue], stats: dict[str, in
                                 f"Object '{name}': {n} triangle(s) with vertex indices out of range were skipped", name))
         keep &= ~bad_idx
     safe = np.where(bad_idx[:, None], 0, tris) if len(tris) else tris
+    # With no vertices every triangle is out of range; one dummy vertex keeps `safe` indexable.
+    padded = pos if nv else np.zeros((1, 3), np.float32)
     # NaN/Inf vertices: drop their triangles (Cycles does the same), warn per object.
-    finite_v = np.isfinite(pos).all(axis=1) if nv else np.zeros(0, bool)
+    finite_v = np.isfinite(padded).all(axis=1)
     bad_pos = ~finite_v[safe].all(axis=1) & keep if len(tris) else keep[:0]
     if bad_pos.any():
         for name, n in _per_object(desc, mesh.object_ids[bad_pos]):
@@ -106,7 +108,7 @@ def _clean_mesh(desc: SceneDescription, issues: list[Issue], stats: dict[str, in
         keep &= ~bad_pos
     # Zero-area triangles: silent, counted.
     if len(tris):
-        p = np.where(finite_v[:, None], pos, 0).astype(np.float64)[safe]
+        p = np.where(finite_v[:, None], padded, 0).astype(np.float64)[safe]
         area2 = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
         degenerate = keep & ~(area2 > 0)
         stats["degenerate_triangles"] = int(degenerate.sum())
@@ -122,27 +124,41 @@ def _clean_mesh(desc: SceneDescription, issues: list[Issue], stats: dict[str, in
     stats["triangles"] = int(keep.sum())
     normals = mesh.normals
     smooth = mesh.smooth
+    if normals is not None and (len(normals) != nv or (smooth is not None and len(smooth) != len(tris))):
+        issues.append(Issue("warning", "normal_count_mismatch",
+                            f"{len(normals)} shading normals for {nv} vertices: normals ignored (flat shading)"))
+        normals = smooth = None
     if normals is not None:
         ok = np.isfinite(normals).all(axis=1) & (np.linalg.norm(normals, axis=1) > 1e-12)
         normals = np.where(ok[:, None], normals, 0).astype(np.float32)
         normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
-        tri_ok = ok[safe].all(axis=1) if len(tris) else ok[:0]
+        tri_ok = (ok if nv else np.zeros(1, bool))[safe].all(axis=1) if len(tris) else ok[:0]
         smooth = (np.ones(len(tris), bool) if smooth is None else smooth) & tri_ok
     return MeshTable(pos, tris[keep], mat_ids[keep], mesh.object_ids[keep],
                      normals, None if smooth is None else smooth[keep])
 
 
-def _clean_materials(mats: MaterialTable) -> MaterialTable:
-    """Clip to valid ranges, replace NaN with defaults, append the grey fallback row."""
+def _clean_materials(mats: MaterialTable, issues: list[Issue]) -> MaterialTable:
+    """Clip to valid ranges, replace NaN with defaults, append the grey fallback row.
+
+    Non-finite values are a warning per material (NaN → the default, an infinite emission
+    → no emission: an infinitely bright emitter has no meaningful image)."""
     def fix(a, lo, hi, default):
         return np.clip(np.nan_to_num(a, nan=default, posinf=hi, neginf=lo), lo, hi)
+    rows = [np.asarray(a, np.float64).reshape(mats.n_materials, -1) for a in
+            (mats.base_color, mats.roughness, mats.metallic, mats.specular, mats.emission)]
+    bad = ~np.isfinite(np.hstack(rows)).all(axis=1)
+    for i in np.flatnonzero(bad):
+        issues.append(Issue("warning", "nonfinite_material",
+                            f"Material '{mats.names[i]}': NaN/Inf values replaced by defaults (no emission)"))
     return MaterialTable(
         mats.names + ("Ercuts fallback grey",),
         np.vstack([fix(mats.base_color, 0, 1, 0.8), [[0.8, 0.8, 0.8]]]),
         np.append(fix(mats.roughness, 0, 1, 0.5), 1.0),
         np.append(fix(mats.metallic, 0, 1, 0.0), 0.0),
         np.append(fix(mats.specular, 0, 1, 0.5), 0.0),
-        np.vstack([fix(mats.emission, 0, np.inf, 0.0), [[0, 0, 0]]]).reshape(-1, 3),
+        np.vstack([np.where(np.isfinite(mats.emission), np.maximum(mats.emission, 0), 0),
+                   [[0, 0, 0]]]).reshape(-1, 3),
     )
 
 
@@ -171,7 +187,8 @@ def _clean_lights(desc, issues, stats):
     sl = SunLights(d, np.maximum(sl.irradiance[on], 0), sl.angle[on], sl.object_ids[on])
     ok = _finite_rows(desc, [al.center, al.axis_u, al.axis_v, al.normal, al.radiance],
                       al.object_ids, "area", issues)
-    area = np.linalg.norm(np.cross(al.axis_u, al.axis_v), axis=1)
+    with np.errstate(over="ignore", invalid="ignore"):    # non-finite rows are dropped by `ok`
+        area = np.linalg.norm(np.cross(al.axis_u.astype(np.float64), al.axis_v.astype(np.float64)), axis=1)
     on = ok & (luminance(np.maximum(al.radiance, 0)) > 0) & (area > 0) & (np.linalg.norm(al.normal, axis=1) > 0)
     stats["dropped_zero_lights"] += int((ok & ~on).sum())
     n = al.normal[on] / np.linalg.norm(al.normal[on], axis=1, keepdims=True)
@@ -198,9 +215,11 @@ def sanitize(desc: SceneDescription) -> Validated:
     stats: dict[str, int] = {}
     _check_camera(desc)
     mesh = _clean_mesh(desc, issues, stats)
-    mats = _clean_materials(desc.materials)
+    mats = _clean_materials(desc.materials, issues)
     pl, sl, al = _clean_lights(desc, issues, stats)
     world = np.clip(np.nan_to_num(desc.world_radiance, nan=0.0, posinf=0.0), 0, None)
+    if not np.isfinite(desc.world_radiance).all():
+        issues.append(Issue("warning", "nonfinite_world", "World: NaN/Inf background colour, rendered black"))
     clean = desc.replace(mesh=mesh, materials=mats, point_lights=pl, sun_lights=sl, area_lights=al,
                          world_radiance=world)
     if not has_emitters(clean):

@@ -116,3 +116,29 @@ def test_nan_material_values_are_replaced():
     v = sanitize(d.replace(materials=bad))
     assert np.isfinite(v.desc.materials.base_color).all()
     assert (v.desc.materials.base_color <= 1).all() and (v.desc.materials.emission >= 0).all()
+
+
+def test_triangles_without_vertices_are_dropped_not_a_crash():
+    v = sanitize(scene(positions=np.zeros((0, 3)), triangles=np.array([[0, 1, 2]])))
+    assert "index_out_of_range" in codes(v) and v.desc.mesh.n_triangles == 0
+
+
+def test_normal_count_mismatch_warns_and_shades_flat():
+    d = scene()
+    m = d.mesh
+    d = d.replace(mesh=MeshTable(m.positions, m.triangles, m.material_ids, m.object_ids, np.ones((2, 3))))
+    v = sanitize(d)
+    assert "normal_count_mismatch" in codes(v) and v.desc.mesh.normals is None
+
+
+def test_nonfinite_material_values_warn_and_never_emit():
+    d = scene()
+    mats = MaterialTable(("Hot",), [[np.nan, 0.5, 0.5]], [0.5], [0.0], [0.5], [[np.inf, 1.0, 0.0]])
+    v = sanitize(d.replace(materials=mats))
+    assert codes(v) == ["nonfinite_material"] and "'Hot'" in v.issues[0].message
+    assert np.isfinite(v.desc.materials.emission).all() and v.desc.materials.emission[0, 0] == 0
+
+
+def test_nonfinite_world_warns_and_renders_black_background():
+    v = sanitize(scene(world_radiance=[np.inf, 0.0, np.nan]))
+    assert "nonfinite_world" in codes(v) and (v.desc.world_radiance == 0).all()

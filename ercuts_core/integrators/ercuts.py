@@ -19,6 +19,37 @@ Time: with ``time_limit`` > 0 each phase gets a share of the time left (rough BD
 chains 30 %, VPL normalisation 15 % — fewer E1 samples per VPL if needed — and the rest for
 the gather, whose cut-size cap is fitted to the time left after each batch); a phase that
 runs out stops cleanly (fewer passes, shorter chains, smaller cuts) and the stats say so.
+
+Progress and cancellation (api.md): messages start with the phase ("BDPT", "ER chains",
+"VPLs", "Light tree", "Lightcuts", fractions in :data:`PHASES`); previews show the rough
+image after each BDPT pass and the image so far during the gather. A cancel (or the time
+limit) before the gather returns the rough BDPT image; during the gather, the pixels
+gathered so far (the current batch finishes with coarser cuts) and the rough image elsewhere.
+
+Passes (``RenderResult.aovs``), per pixel:
+
+* 'emission' — emitters and world seen directly (first shading point);
+* 'direct' — next-event light from point, spot, sun and environment lights, plus the
+  gathered light of *emitter VPLs* (x2 is the chain path's light vertex, k = 2: light from
+  an area light or emissive mesh scattered once, at x1) and their fallback deposits;
+* 'indirect' — the gathered light of all other VPLs (x2 scatters) and their fallback.
+  The split of a lightcut cluster follows its intensity: the estimate M·G·V·I_C of a cut
+  node is divided by the node's share of emitter-VPL intensity. emission + direct +
+  indirect is the image. Light in a pass is the image's (after the global energy scale),
+  so the split is as good as the VPL image; BDPT/PATH classify every path exactly.
+* 'vpl_density' (h, w, 1) — the number of (merged, normalised) VPLs whose position the
+  camera sees in the pixel (projected, unoccluded): where the light sources of the
+  gather sit.
+* 'er_caustic' (h, w, 3) — the ER chain energy that does not reach the pixel through a
+  diffuse-looking VPL: the gathered VPL light at *glossy* shading points (a specular lobe
+  with roughness < :data:`GLOSSY_ROUGHNESS`, where the paper renders caustic paths by ERPT
+  instead) plus the ERPT fallback deposits of VPLs that lit no sampled pixel. This
+  implementation deposits no separate caustic ERPT energy (the material model has no delta
+  lobes and every chain state deposits into its VPL), so er_caustic is a *part* of
+  direct + indirect, not an addition to the image; 0 in scenes without glossy surfaces and
+  fallback deposits.
+* 'cut_size' (h, w, 1) mean lightcut size, 'chain_deposits' (h, w, 1) chain states whose
+  x1 lies in the pixel, and 'depth', 'normal', 'albedo' of the first shading point.
 """
 from __future__ import annotations
 

@@ -41,6 +41,7 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from .arrays import take_rows
 from .light_tree import LightTree, luminance
 
 #: Pair budget of one brute-force block (memory ≈ 200 B per pair).
@@ -137,7 +138,12 @@ def _frame(n: NDArray) -> tuple[NDArray, NDArray]:
 def _range_along(d: NDArray, lo: NDArray, hi: NDArray) -> tuple[NDArray, NDArray]:
     """Exact (min, max) of d·v over boxes v ∈ [lo, hi]; all (K,3) → (K,), (K,)."""
     a, b = d * lo, d * hi
-    return np.minimum(a, b).sum(axis=1), np.maximum(a, b).sum(axis=1)
+    return _rowsum3(np.minimum(a, b)), _rowsum3(np.maximum(a, b))
+
+
+def _rowsum3(v: NDArray) -> NDArray:
+    """(K,) v[:, 0] + v[:, 1] + v[:, 2]: the same sum as v.sum(axis=1), several times faster."""
+    return v[:, 0] + v[:, 1] + v[:, 2]
 
 
 def _min_abs(lo: NDArray, hi: NDArray) -> NDArray:
@@ -170,7 +176,7 @@ def geometry_bound(x: NDArray, bmin: NDArray, bmax: NDArray, cone_axis: NDArray,
     (algorithm.md §E.2(c)).  With ``clamp > 0``, Ḡ ≤ clamp.
     """
     x = np.broadcast_to(x, bmin.shape)
-    d2 = np.sum((x - np.clip(x, bmin, bmax)) ** 2, axis=1)
+    d2 = _rowsum3((x - np.clip(x, bmin, bmax)) ** 2)
     c = cosine_bound(np.zeros_like(bmin), cone_axis, x - bmax, x - bmin)
     s = np.sqrt(np.maximum(0.0, 1.0 - c * c))
     cb = np.clip(cone_cos, -1.0, 1.0)
@@ -184,7 +190,7 @@ def geometry_bound(x: NDArray, bmin: NDArray, bmax: NDArray, cone_axis: NDArray,
 def _receiver_cos_bound(pts: ShadingPoints, pidx: NDArray, bmin: NDArray,
                         bmax: NDArray) -> NDArray:
     """Bound (K,) of the receiver cosine term over the boxes (both sides if transmissive)."""
-    x, n = pts.p[pidx], pts.n[pidx]
+    x, n = take_rows(pts.p, pidx), take_rows(pts.n, pidx)
     cb = cosine_bound(x, n, bmin, bmax)
     if pts.transmissive is not None and np.any(pts.transmissive[pidx]):
         tr = np.asarray(pts.transmissive, bool)[pidx]
@@ -199,12 +205,12 @@ def cluster_bound(tree: LightTree, node: NDArray, pts: ShadingPoints, pidx: NDAr
     L̄_C = cosbound(x, n_x, box_C) · Ḡ_C · Y(f̄_x ⊙ I_C).  The per-channel product
     bounds Y(f ⊙ I_C) for any BSDF value f ≤ f̄ (it equals Y(f̄)·Y(I_C) for grey f̄).
     """
-    bmin, bmax = tree.bmin[node], tree.bmax[node]
+    bmin, bmax = take_rows(tree.bmin, node), take_rows(tree.bmax, node)
     m = _receiver_cos_bound(pts, pidx, bmin, bmax)
-    m = m * luminance(pts.f_bound[pidx] * tree.intensity[node])
-    m = np.where(tree.is_leaf[node], 0.0, m)
-    g = geometry_bound(pts.p[pidx], bmin, bmax, tree.cone_axis[node], tree.cone_cos[node],
-                       clamp)
+    m = m * luminance(take_rows(pts.f_bound, pidx) * take_rows(tree.intensity, node))
+    m = np.where(take_rows(tree.is_leaf, node), 0.0, m)
+    g = geometry_bound(take_rows(pts.p, pidx), bmin, bmax, take_rows(tree.cone_axis, node),
+                       take_rows(tree.cone_cos, node), clamp)
     return m * np.where(m > 0.0, g, 0.0)
 
 
@@ -224,9 +230,9 @@ def evaluate_lights(pts: ShadingPoints, pidx: NDArray, vidx: NDArray, vpl_pos: N
         loss: (K,3) f·cos θ_x·(G − min(G, clamp))·V, the part removed by the clamp.
         rays: number of shadow rays traced (only for pairs with a non-zero M·G).
     """
-    x, q, qn = pts.p[pidx], vpl_pos[vidx], vpl_normal[vidx]
+    x, q, qn = take_rows(pts.p, pidx), take_rows(vpl_pos, vidx), take_rows(vpl_normal, vidx)
     d = q - x
-    d2 = np.maximum(np.sum(d * d, axis=1), _D2_MIN)
+    d2 = np.maximum(_rowsum3(d * d), _D2_MIN)
     wi = d / np.sqrt(d2)[:, None]
     cos_l = np.maximum(0.0, -_dot(qn, wi))
     cos_x = _dot(pts.n[pidx], wi)
@@ -302,8 +308,8 @@ class _Entries:
         return _Entries(z, z, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
 
     def take(self, idx: NDArray) -> "_Entries":
-        return _Entries(self.pt[idx], self.node[idx], self.unit[idx], self.loss[idx],
-                        self.bound[idx])
+        return _Entries(*(take_rows(a, idx) for a in (self.pt, self.node, self.unit, self.loss,
+                                                      self.bound)))
 
     @staticmethod
     def cat(parts: list["_Entries"]) -> "_Entries":

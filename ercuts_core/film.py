@@ -37,8 +37,9 @@ class Film:
         splat: (h·w, 3) float64 sum of splatted radiance.
         alpha: (h·w,) float64 sum of coverage.
         aov_sum: name → (h·w, C) float64 sums of first-hit AOVs.
-        color_parts, splat_parts: (3, h·w, 3) float64 the same sums split by path class
-            (:data:`LIGHT_PASSES`); ``color == color_parts.sum(0)`` up to rounding.
+        color_parts: (3, h·w, 3) float64 camera samples plus splats / (h·w), split by path
+            class (:data:`LIGHT_PASSES`): ``color_parts.sum(0) == color + splat / (h·w)``
+            up to rounding (splats are pre-divided so that one array serves both).
         classified: every contribution so far came with its path class (else the light
             passes are not reported).
         passes_done: complete passes (samples per pixel) accumulated.
@@ -52,7 +53,6 @@ class Film:
         self.splat = np.zeros((n, 3))
         self.alpha = np.zeros(n)
         self.color_parts = np.zeros((3, n, 3))
-        self.splat_parts = np.zeros((3, n, 3))
         self.classified = True
         self.aov_sum: dict[str, NDArray] = {}
         self.passes_done = 0
@@ -109,7 +109,7 @@ class Film:
         if cls is not None:
             cls = np.asarray(cls)[ok]
             # One bincount over (class, pixel) cells: class c of pixel p is cell c·n + p.
-            self._add(self.splat_parts.reshape(-1, 3), cls * w.n_pixels + pix, L)
+            self._add(self.color_parts.reshape(-1, 3), cls * w.n_pixels + pix, L / w.n_pixels)
 
     def set_pixels(self, parts: NDArray, alpha: NDArray) -> None:
         """Replace the film by one finished pass: ``parts`` (3, h·w, 3) per-pixel radiance by
@@ -117,7 +117,6 @@ class Film:
         self.color_parts[:] = parts
         self.color[:] = parts.sum(axis=0)
         self.splat[:] = 0.0
-        self.splat_parts[:] = 0.0
         self.alpha[:] = alpha
         self.passes_done = 1
 
@@ -134,7 +133,6 @@ class Film:
         self.splat += other.splat
         self.alpha += other.alpha
         self.color_parts += other.color_parts
-        self.splat_parts += other.splat_parts
         self.classified &= other.classified
         for k, v in other.aov_sum.items():
             self.aov_sum[k] = self.aov_sum.get(k, 0) + v
@@ -168,5 +166,4 @@ class Film:
     def light_parts(self) -> NDArray:
         """(3, h·w, 3) float64 mean radiance per light pass (:data:`LIGHT_PASSES`), normalised
         like :meth:`image`."""
-        spp = max(self.passes_done, 1)
-        return self.color_parts / spp + self.splat_parts / (spp * self.window.n_pixels)
+        return self.color_parts / max(self.passes_done, 1)

@@ -135,3 +135,23 @@ def test_ercuts_direct_and_indirect_match_bdpt():
     for name in ("direct", "indirect"):
         ref = np.mean([x[name].sum() for x in b])
         assert abs(e[name].sum() / ref - 1) < 0.10, (name, e[name].sum(), ref)
+
+
+def test_film_drops_a_sample_whole_when_a_part_is_not_finite():
+    """A non-finite part drops the whole sample (counted), so the passes still sum to the
+    image; a contribution without its path class switches the light passes off."""
+    from ercuts_core.camera import Window
+    from ercuts_core.film import Film
+
+    film = Film(Window(0, 0, 2, 1))
+    parts = np.zeros((3, 2, 3))
+    parts[0, 0], parts[1, 1], parts[2, 1] = 1.0, 2.0, np.nan
+    film.add_samples(np.array([0, 1]), parts.sum(axis=0), np.ones(2), parts=parts)
+    film.add_splats(np.array([[1.5, 0.5]]), np.array([[4.0, 4.0, 4.0]]), np.array([1]))
+    film.merge(Film(film.window))
+    assert film.nonfinite == 1
+    aov = film.aovs()
+    np.testing.assert_allclose(sum(aov[n] for n in LIGHT_PASSES), film.image()[..., :3])
+    np.testing.assert_allclose(aov["direct"][0, 1], 2.0)       # the splat, / n_pixels
+    film.add_samples(np.array([0]), np.ones((1, 3)), np.ones(1))
+    assert "emission" not in film.aovs()

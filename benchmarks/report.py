@@ -64,8 +64,9 @@ def _save_run(base: str, image: np.ndarray, record: dict) -> None:
     from ercuts_core.image_io import atomic_path
 
     os.makedirs(os.path.dirname(base), exist_ok=True)
-    with atomic_path(base + ".npz", ".npz") as tmp:
-        np.savez_compressed(tmp, image=image.astype(np.float16))
+    if image is not None:
+        with atomic_path(base + ".npz", ".npz") as tmp:
+            np.savez_compressed(tmp, image=image.astype(np.float16))
     with atomic_path(base + ".json", ".json") as tmp, open(tmp, "w") as fh:
         json.dump(record, fh, indent=1)
 
@@ -104,14 +105,19 @@ def cycles_rate(scene: str, w: int, h: int) -> float:
 
 
 def render_one(scene: str, engine: str, budget: float, seed: int, w: int, h: int) -> dict:
-    if engine == "CYCLES":
-        import cycles_runner
+    """Render and store one run; a failing render is stored as {'error': …} (no image) and
+    listed in the report, so one broken cell does not stop the run."""
+    try:
+        if engine == "CYCLES":
+            import cycles_runner
 
-        r = cycles_runner.render_cycles(scene, budget, seed, w, h, cycles_rate(scene, w, h))
-        image = r.pop("image")
-        record = dict(r)
-    else:
-        image, record = render_ercuts(scene, engine, budget, seed, w, h)
+            r = cycles_runner.render_cycles(scene, budget, seed, w, h, cycles_rate(scene, w, h))
+            image = r.pop("image")
+            record = dict(r)
+        else:
+            image, record = render_ercuts(scene, engine, budget, seed, w, h)
+    except Exception as exc:  # noqa: BLE001  (recorded and reported, the run goes on)
+        image, record = None, dict(error=f"{type(exc).__name__}: {exc}", wall=float("nan"))
     record.update(scene=scene, engine=engine, budget=budget, seed=seed, width=w, height=h,
                   finished=_now())
     _save_run(run_path(scene, engine, budget, seed), image, record)
@@ -161,7 +167,9 @@ def run_all(args) -> None:
     for i, (s, e, b, k) in enumerate(todo):
         rec = render_one(s, e, b, k, args.width, args.height)
         extra = f", {rec['samples']} spp{' (capped, estimate)' if rec.get('capped') else ''}" \
-            if e == "CYCLES" else ""
+            if e == "CYCLES" and "error" not in rec else ""
+        if "error" in rec:
+            extra = f", FAILED: {rec['error']}"
         print(f"report: [{i + 1}/{len(todo)}] {s} {e} {b:g} s seed {k}: wall {rec['wall']:.1f} s{extra} "
               f"(elapsed {(time.perf_counter() - t_start) / 60:.1f} min)", flush=True)
 
@@ -196,7 +204,8 @@ def load_runs(w: int, h: int) -> list[dict]:
                 rec = json.load(fh)
             if (rec.get("width"), rec.get("height")) != (w, h):
                 continue
-            rec["image"] = np.load(os.path.join(d, f[:-5] + ".npz"))["image"].astype(np.float64)
+            if "error" not in rec:
+                rec["image"] = np.load(os.path.join(d, f[:-5] + ".npz"))["image"].astype(np.float64)
             out.append(rec)
     return out
 
@@ -205,7 +214,7 @@ def evaluate(runs: list[dict], refs: dict) -> None:
     """Add relMSE, RMSE, SMAPE, energy ratio (and the floor-corrected relMSE) to every run."""
     for r in runs:
         ref = refs.get(r["scene"])
-        if ref is None:
+        if ref is None or "error" in r:
             continue
         x, g = r["image"], ref["image"]
         r["relmse"] = metrics.relmse(x, g)
@@ -543,6 +552,7 @@ def write_report(args) -> str:
     refs = {s: r for s in args.scenes if (r := load_reference(s, w, h)) is not None}
     runs = [r for r in load_runs(w, h) if r["scene"] in args.scenes and r["engine"] in args.engines]
     evaluate(runs, refs)
+    failed = [r for r in runs if "error" in r]
     runs = [r for r in runs if "relmse" in r]
     g = groups(runs)
     budgets = sorted({r["budget"] for r in runs})
@@ -581,12 +591,16 @@ def write_report(args) -> str:
                   f"Reference: Cycles {info['spp']} spp in {info['chunks']} chunks "
                   f"({info['render_seconds'] / 60:.0f} min); its own noise adds relMSE "
                   f"{ref['floor']['relmse']:.5f} in expectation (relMSE between its two halves: "
-                  f"{_fmt(info.get('relmse_between_halves'), 5)}).", ""]
+                  f"{_fmt(info.get('relmse_between_halves'), 5)}, ≈ 4× that when the chunks agree).", ""]
         lines += scene_table(s, g, budgets, engines) + [""]
         pic = f"report_{s}.png"
         if plot_side_by_side(s, g, ref, engines, max(b for b in budgets if (s, engines[0], b) in g),
                              os.path.join(RESULTS, pic)) is not None:
             lines += [f"![{s} side by side]({pic})", ""]
+    if failed:
+        lines += ["## Failed renders", "", "| scene | engine | budget | seed | error |", "|---|---|---|---|---|"]
+        lines += [f"| {r['scene']} | {r['engine']} | {r['budget']:g} s | {r['seed']} | "
+                  f"{r['error'].replace('|', '/')[:200]} |" for r in failed] + [""]
     lines += _include("Lightcuts scaling", os.path.join(RESULTS, "lightcuts_scaling.md"),
                       "lightcuts_scaling.md")
     lines += _include("Tracer efficiency", os.path.join(RESULTS, "tracer_efficiency.md"),

@@ -347,6 +347,13 @@ def _select(e: _Entries, err: NDArray, thr: NDArray, budget: NDArray, band: floa
     cand = np.flatnonzero(err > thr)
     if cand.size == 0:
         return cand
+    if 0.0 < band <= 1.0:
+        # Drop what the band drops before sorting (lexsort dominates the gather otherwise).
+        # The dropped entries sort after every kept one of their point, so the ranks and
+        # the order of the rest are unchanged.
+        top = np.full(len(budget), -np.inf)
+        np.maximum.at(top, e.pt[cand], err[cand])
+        cand = cand[err[cand] >= band * top[e.pt[cand]]]
     cand = cand[np.lexsort((-err[cand], e.pt[cand]))]
     grp = e.pt[cand]
     first = np.searchsorted(grp, grp, side="left")

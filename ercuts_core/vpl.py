@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .arrays import take_rows
 from .bsdf import Bsdf, bsdf_max_value
 from .camera import Window
 from .er_sampling import ChainResult
@@ -182,9 +183,10 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
     for v, vv, s in _chunks(V, n_samples, chunk):
         n = len(vv)
         local = sample_cosine_hemisphere(rng.random((n, 2)))
-        t, b = coordinate_system(normal[vv])
-        w = to_world(local, t, b, normal[vv])
-        o = scene.tracer.offset(pos[vv], normal[vv], w)
+        nv = take_rows(normal, vv)
+        t, b = coordinate_system(nv)
+        w = to_world(local, t, b, nv)
+        o = scene.tracer.offset(take_rows(pos, vv), nv, w)
         surf = scene.intersect(o, w)
         val = np.zeros(n)
         h = np.flatnonzero(surf.valid)

@@ -327,3 +327,33 @@ def test_cluster_bound_is_zero_for_leaves() -> None:
     for p in range(3):
         b = cluster_bound(tree, node, pts, np.full(tree.n_nodes, p))
         assert np.all(b[tree.is_leaf] == 0) and np.any(b[~tree.is_leaf] > 0)
+
+
+def test_select_band_prefilter_matches_full_sort():
+    """_select drops out-of-band candidates before sorting; same entries, same order as
+    sorting every candidate (the pre-filter is a speed-up only)."""
+    from ercuts_core.lightcuts import _Entries, _select
+
+    def reference(e, err, thr, budget, band):
+        cand = np.flatnonzero(err > thr)
+        cand = cand[np.lexsort((-err[cand], e.pt[cand]))]
+        grp = e.pt[cand]
+        first = np.searchsorted(grp, grp, side="left")
+        rank = np.arange(cand.size) - first
+        keep = rank < budget[grp]
+        if band > 0.0:
+            keep &= (err[cand] >= band * err[cand[first]]) | (rank == 0)
+        return cand[keep]
+
+    rng = np.random.default_rng(5)
+    for trial in range(20):
+        k, n = 5000, 64
+        pt = rng.integers(0, n, k)
+        err = np.round(rng.lognormal(0.0, 2.0, k), 1)          # ties
+        err[rng.random(k) < 0.01] = np.inf
+        e = _Entries(pt, np.zeros(k, np.int64), np.zeros((k, 3)), np.zeros((k, 3)), err)
+        thr = rng.random(k) * 2.0
+        budget = rng.integers(0, 20, n)
+        for band in (0.0, 0.25, 1.0):
+            got = _select(e, err, thr, budget, band)
+            assert np.array_equal(got, reference(e, err, thr, budget, band)), (trial, band)

@@ -184,8 +184,10 @@ class ErcutsIntegrator:
         rough_parts = rough.light_parts()
 
         def show(point_parts, complete):
-            parts = self._compose(base, self._per_pixel_parts(point_parts, g.samples), None, 1.0)
-            clock.show(lambda: _rgba(window, np.where(complete[None, :, None], parts, rough_parts), alpha))
+            def image():
+                parts = self._compose(base, self._per_pixel_parts(point_parts, g.samples), None, 1.0)
+                return _rgba(window, np.where(complete[None, :, None], parts, rough_parts), alpha)
+            clock.show(image)
 
         gathered = self._gather(g, vpls, tree, gmax, clock, stats, show)
         timings["cuts"] = time.perf_counter() - t0

@@ -172,8 +172,13 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         elapsed = time.monotonic() - self._start
         self.update_stats("Ercuts", f"{self._stats_prefix}{result.summary()} | "
                                     f"{_format_time(elapsed)}")
-        if self.is_preview:
-            return
+        if not self.is_preview:
+            self._report(scene, layer_name, exported, result, settings, images, missing,
+                         elapsed, progressive=bool(kwargs))
+
+    def _report(self, scene, layer_name, exported, result, settings, images, missing,
+                elapsed, progressive):
+        """After a final render: ``last_render``, the sidecar, one warning report."""
         warnings = self._warnings(scene, exported, result, missing, settings)
         last_render.clear()
         last_render.update(
@@ -181,7 +186,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
             export_seconds=exported.seconds, total_seconds=elapsed,
             summary=result.summary(), window=tuple(result.window),
             export_stats=dict(exported.stats), stats=dict(result.stats), passes=list(images),
-            missing_passes=[p.name for p in missing], progressive=bool(kwargs),
+            missing_passes=[p.name for p in missing], progressive=progressive,
             layer=layer_name)
         if scene.ercuts.write_sidecar:
             last_render["sidecar"] = self._write_sidecar(scene, layer_name, result, settings,

@@ -93,10 +93,10 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
 
     @staticmethod
     def _error_message(exc: Exception) -> str:
-        from .export import ExportError
-
-        known = (ExportError,)
-        try:
+        known = ()
+        try:  # both import numpy: without it, fall through to the dependency message
+            from .export import ExportError
+            known += (ExportError,)
             from ercuts_core.validate import SceneError
             known += (SceneError,)
         except ImportError:

@@ -67,6 +67,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from ..arrays import take_rows
 from ..bsdf import Bsdf
 from ..film import Film, path_class
 from ..lights import AREA, ENV, POINT, SUN, TRI
@@ -108,7 +109,7 @@ class _VertexRows:
         self.wo, self.beta, self.g_prev = data[:, 9:12], data[:, 12:15], data[:, 15]
 
     def take(self, idx: NDArray) -> "_VertexRows":
-        return _VertexRows(self.data[idx])
+        return _VertexRows(take_rows(self.data, idx))
 
 
 class _Subpaths:
@@ -154,11 +155,11 @@ class _Subpaths:
 
     def rows(self, k: NDArray, lane: NDArray) -> _VertexRows:
         """The float attributes of vertex k[r] of lane[r] for connection rows r."""
-        return _VertexRows(self.data.reshape(-1, 16)[k * self.n_lanes + lane])
+        return _VertexRows(take_rows(self.data.reshape(-1, 16), k * self.n_lanes + lane))
 
     def at(self, name: str, k: NDArray, lane: NDArray) -> NDArray:
         """Gather the (V, N) attribute ``name`` (pdf_fwd, pdf_rev, mat, prim, env) for rows."""
-        return getattr(self, name).reshape(-1)[k * self.n_lanes + lane]
+        return take_rows(getattr(self, name).reshape(-1), k * self.n_lanes + lane)
 
     def surface(self, k: int) -> NDArray:
         """(N,) lanes whose vertex k exists and lies on a surface."""

@@ -183,7 +183,7 @@ def test_no_lights_warns_once_and_renders_black(tmp_path):
 
 def test_zero_power_light_is_dropped_silently_and_counted(tmp_path):
     lit_scene()
-    bh.light("SPOT", location=(1, 0, 2), energy=0.0, name="DarkSpot")
+    bh.light("POINT", location=(1, 0, 2), energy=0.0, name="DarkLamp")
     img = render(tmp_path)
     assert warnings() == []
     assert engine.last_render["stats"]["dropped_zero_lights"] == 1

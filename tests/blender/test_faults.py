@@ -1,5 +1,6 @@
 """Faults through the add-on (real bpy): cancelling in every phase, an exception in the core,
-atomic output files, and a failed frame that must not overwrite an earlier good one.
+and a failed frame that must not overwrite an earlier good one (the core's own atomic
+file writers are tested in tests/test_image_io.py).
 
 Cancelling stands in for Esc by returning False from the engine's progress callback when
 the core's message names the phase (api.md: messages start with the phase name). A
@@ -148,44 +149,3 @@ def test_failed_frame_never_overwrites_an_earlier_good_one(tmp_path, monkeypatch
         bpy.ops.render.render(animation=True)
     assert _digest(frame2) == good
     assert not [f for f in os.listdir(tmp_path) if f.startswith(".") or f.endswith(".tmp")]
-
-
-# --------------------------------------------------------------------------- atomic files
-
-def test_exr_writes_are_atomic(tmp_path, monkeypatch):
-    """A writer that dies half-way leaves the earlier file untouched and no temp file."""
-    import OpenEXR
-
-    from ercuts_core.image_io import read_exr, write_exr
-
-    path = tmp_path / "image.exr"
-    good = np.full((6, 8, 4), 0.25, np.float32)
-    write_exr(path, good)
-    before = path.read_bytes()
-
-    class Interrupted(BaseException):
-        pass
-
-    def truncated_write(self, filename):
-        with open(filename, "wb") as f:
-            f.write(before[: len(before) // 2])
-        raise Interrupted()
-
-    monkeypatch.setattr(OpenEXR.File, "write", truncated_write)
-    with pytest.raises(Interrupted):
-        write_exr(path, np.zeros((6, 8, 4), np.float32))
-    monkeypatch.undo()
-    assert path.read_bytes() == before and os.listdir(tmp_path) == ["image.exr"]
-    np.testing.assert_array_equal(read_exr(path)["RGBA"], good)
-
-
-def test_png_writes_are_atomic(tmp_path, monkeypatch):
-    from ercuts_core import image_io
-
-    path = tmp_path / "image.png"
-    image_io.write_png(path, np.full((6, 8, 4), 0.5, np.float32))
-    before = path.read_bytes()
-    monkeypatch.setattr(image_io, "encode_png", lambda rgb8: (_ for _ in ()).throw(OSError("disk full")))
-    with pytest.raises(OSError):
-        image_io.write_png(path, np.zeros((6, 8, 4), np.float32))
-    assert path.read_bytes() == before and os.listdir(tmp_path) == ["image.png"]

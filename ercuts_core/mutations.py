@@ -31,7 +31,8 @@ from numpy.typing import NDArray
 
 from .bsdf import Bsdf
 from .lights import AREA, ENV, SUN, TRI
-from .paths import PathBatch, edge_visible
+from .arrays import take_rows
+from .paths import PathBatch, edge_visible, slot_rows
 from .sampling import coordinate_system
 from .scene import BuiltScene
 
@@ -186,11 +187,11 @@ def two_tailed_geometric(center: NDArray, lo: NDArray, hi: NDArray, size: int) -
 
 def _walk_pdf(scene: BuiltScene, paths: PathBatch, rows: NDArray, j: NDArray) -> NDArray:
     """Area density of generating vertex j from j−1 by BSDF sampling (wo toward j−2)."""
-    prev2, prev, cur = paths.p[rows, j - 2], paths.p[rows, j - 1], paths.p[rows, j]
+    prev2, prev, cur = (slot_rows(paths.p, rows, j - k) for k in (2, 1, 0))
     wo, _ = _unit(prev2 - prev)
     wi, dist = _unit(cur - prev)
-    bsdf = Bsdf.from_table(scene.materials, paths.mat[rows, j - 1], paths.ns[rows, j - 1], paths.ng[rows, j - 1])
-    return bsdf.pdf(wo, wi) * np.abs(_dot(paths.ng[rows, j], wi)) / np.maximum(dist * dist, 1e-300)
+    bsdf = Bsdf.from_table(scene.materials, *(slot_rows(a, rows, j - 1) for a in (paths.mat, paths.ns, paths.ng)))
+    return bsdf.pdf(wo, wi) * np.abs(_dot(slot_rows(paths.ng, rows, j), wi)) / np.maximum(dist * dist, 1e-300)
 
 
 def _light_vertex_pdf(scene: BuiltScene, paths: PathBatch, rows: NDArray) -> NDArray:
@@ -242,9 +243,10 @@ def bidirectional_mutation(ctx: MutationContext, x: PathBatch, rng: np.random.Ge
         if not act.any():
             break
         r = np.flatnonzero(act)
-        bsdf = Bsdf.from_table(scene.materials, y.mat[r, j - 1], y.ns[r, j - 1], y.ng[r, j - 1])
-        bs = bsdf.sample(cur_wo[r], rng.random((len(r), 3)))
-        o = scene.tracer.offset(y.p[r, j - 1], y.ng[r, j - 1], bs.wi)
+        mat, ns, ng = (slot_rows(a, r, j - 1) for a in (y.mat, y.ns, y.ng))
+        bsdf = Bsdf.from_table(scene.materials, mat, ns, ng)
+        bs = bsdf.sample(take_rows(cur_wo, r), rng.random((len(r), 3)))
+        o = scene.tracer.offset(slot_rows(y.p, r, j - 1), ng, bs.wi)
         surf = scene.intersect(o, bs.wi)
         ok = bs.valid & surf.valid & (bs.pdf > 0)
         valid[r[~ok]] = False

@@ -99,8 +99,14 @@ class PathBatch:
     def vertex(self, i: NDArray | int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
         """Position, ng, ns, mat of vertex ``i`` (scalar or (C,)) of every path."""
         rows = np.arange(len(self))
-        i = np.broadcast_to(i, rows.shape)
-        return self.p[rows, i], self.ng[rows, i], self.ns[rows, i], self.mat[rows, i]
+        return tuple(slot_rows(a, rows, i) for a in (self.p, self.ng, self.ns, self.mat))
+
+
+def slot_rows(a: NDArray, rows: NDArray, i) -> NDArray:
+    """``a[rows, i]`` for a (C, K, ...) per-path slot array, i scalar or per row (one flat
+    ``np.take``, ~3× faster than the 2-D fancy index)."""
+    C, K = a.shape[:2]
+    return a.reshape((C * K,) + a.shape[2:]).take(rows * K + i, axis=0)
 
 
 def light_kind(scene: BuiltScene, paths: PathBatch) -> NDArray:
@@ -135,21 +141,21 @@ def contribution(scene: BuiltScene, paths: PathBatch, infinite_dir: NDArray | No
         if not act.any():
             break
         r = rows[act]
-        xi, ngi, nsi, mi = paths.p[r, i], paths.ng[r, i], paths.ns[r, i], paths.mat[r, i]
-        wo = paths.p[r, i - 1] - xi
-        wo /= np.maximum(np.linalg.norm(wo, axis=1), 1e-300)[:, None]
+        xi, ngi, nsi, mi = (slot_rows(a, r, i) for a in (paths.p, paths.ng, paths.ns, paths.mat))
+        wo = slot_rows(paths.p, r, i - 1) - xi
+        wo /= np.maximum(np.sqrt(_dot(wo, wo)), 1e-300)[:, None]
         last_edge = (i + 1) == paths.k[r]
-        nxt = paths.p[r, i + 1]
+        nxt = slot_rows(paths.p, r, i + 1)
         inf_edge = last_edge & infinite[r]
         d = np.where(inf_edge[:, None], nxt, nxt - xi)
-        dist = np.linalg.norm(d, axis=1)
+        dist = np.sqrt(_dot(d, d))
         wi = d / np.maximum(dist, 1e-300)[:, None]
         bsdf = Bsdf.from_table(scene.materials, mi, nsi, ngi)
         fr = bsdf.eval(wo, wi) * np.abs(_dot(nsi, wi))[:, None]
         # Conversion at the next vertex: area (surfaces), 1/d² (point), 1 (infinite).
         k_next = kind[r]
         surf_next = ~last_edge | (k_next == AREA) | (k_next == TRI)
-        conv = np.where(surf_next, np.abs(_dot(paths.ng[r, i + 1], wi)) / np.maximum(dist * dist, 1e-300),
+        conv = np.where(surf_next, np.abs(_dot(slot_rows(paths.ng, r, i + 1), wi)) / np.maximum(dist * dist, 1e-300),
                         np.where(inf_edge, 1.0, 1.0 / np.maximum(dist * dist, 1e-300)))
         term = fr * conv[:, None]
         f[r] *= term
@@ -196,9 +202,9 @@ def edge_visible(scene: BuiltScene, paths: PathBatch, i: NDArray) -> NDArray:
     C = len(paths)
     rows = np.arange(C)
     kind = scene.lights.kind[paths.light]
-    a, nga = paths.p[rows, i], paths.ng[rows, i]
+    a, nga = slot_rows(paths.p, rows, i), slot_rows(paths.ng, rows, i)
     j = i + 1
-    b, ngb = paths.p[rows, j], paths.ng[rows, j]
+    b, ngb = slot_rows(paths.p, rows, j), slot_rows(paths.ng, rows, j)
     last = j == paths.k
     infinite = last & ((kind == SUN) | (kind == ENV))
     b = np.where(infinite[:, None], a + b * 4.0 * scene.scene_radius, b)

@@ -15,20 +15,13 @@ import pytest
 
 import blender_helpers as bh
 from addon import engine
+from test_faults import rss_mb
 
 pytestmark = pytest.mark.slow
 
 #: Allowed growth of the resident set per frame over a 100-frame batch render [MiB/frame]
 #: (a leak of one 8×6 film per frame is far below this; a leaked scene or G-buffer is not).
 RSS_SLOPE_MB = 0.05
-
-
-def rss_mb() -> float:
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024.0
-    return 0.0
 
 
 def grid(name: str, n: int, size: float = 10.0):

@@ -86,13 +86,13 @@ class _Clock:
         return self.deadline - time.perf_counter()
 
 
-def _batch_pixels(n_pixels: int, settings: RenderSettings) -> int:
+def _batch_pixels(n_pixels: int, settings: RenderSettings, n_triangles: int = 0) -> int:
     """Pixels per batch: about ``batch_rays`` rays per bounce for PATH; a quarter of that for
     BDPT, whose batch holds two subpaths and all their connections (a batch then stays well
     under a second, so the time limit and cancellation are honoured promptly); smaller when
     the memory budget asks for it (:func:`ercuts_core.memory.plan`), and at most
     :func:`progress_batch_pixels`."""
-    return min(memory_plan(n_pixels, 0, settings).batch_pixels, progress_batch_pixels(settings))
+    return min(memory_plan(n_pixels, n_triangles, settings).batch_pixels, progress_batch_pixels(settings))
 
 
 def progress_batch_pixels(settings: RenderSettings) -> int:
@@ -183,7 +183,7 @@ def _integrate(scene: BuiltScene, settings: RenderSettings, film: Film, clock: _
     """
     integrator = make_integrator(scene, settings)
     n = film.window.n_pixels
-    batch = _batch_pixels(n, settings)
+    batch = _batch_pixels(n, settings, scene.desc.mesh.n_triangles)
     t0 = time.perf_counter()
     label = settings.integrator
     for k in range(settings.samples):

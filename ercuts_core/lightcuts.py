@@ -329,7 +329,7 @@ class _Accum:
     def add(self, tree: LightTree, e: _Entries) -> None:
         if self.kept is not None:
             self.kept.append(e)
-        inten = tree.intensity[e.node]
+        inten = take_rows(tree.intensity, e.node)
         n = len(self.count)
         self.rad += _sum_by(e.pt, e.unit * inten, n)
         self.loss += float(luminance(e.loss * inten).sum())
@@ -401,15 +401,15 @@ def _criterion(e: _Entries, est: NDArray, total: NDArray, mode: str, max_error: 
 def _refine(tree: LightTree, e: _Entries, sel: NDArray, pts: ShadingPoints, lights: tuple,
             clamp: float) -> tuple[_Entries, int]:
     """Children entries of the selected entries; one batched evaluation (one visible call)."""
-    node = e.node[sel]
-    lft, rgt = tree.left[node], tree.right[node]
-    same = np.where(tree.rep[lft] == tree.rep[node], lft, rgt)
+    node = take_rows(e.node, sel)
+    lft, rgt = take_rows(tree.left, node), take_rows(tree.right, node)
+    same = np.where(take_rows(tree.rep, lft) == take_rows(tree.rep, node), lft, rgt)
     other = lft + rgt - same
-    pidx = e.pt[sel]
-    unit, loss, rays = evaluate_lights(pts, pidx, tree.rep[other], *lights, clamp)
+    pidx = take_rows(e.pt, sel)
+    unit, loss, rays = evaluate_lights(pts, pidx, take_rows(tree.rep, other), *lights, clamp)
     kids = _Entries(np.concatenate([pidx, pidx]), np.concatenate([same, other]),
-                    np.concatenate([e.unit[sel], unit]), np.concatenate([e.loss[sel], loss]),
-                    np.zeros(2 * sel.size))
+                    np.concatenate([take_rows(e.unit, sel), unit]),
+                    np.concatenate([take_rows(e.loss, sel), loss]), np.zeros(2 * sel.size))
     kids.bound = cluster_bound(tree, kids.node, pts, kids.pt, clamp)
     return kids, rays
 
@@ -474,7 +474,7 @@ def lightcut(tree: LightTree, vpl_pos: NDArray, vpl_normal: NDArray, vpl_intensi
     e = _retire(tree, e, acc)
     rounds = 0
     while e.pt.size:
-        est = luminance(e.unit * tree.intensity[e.node])
+        est = luminance(e.unit * take_rows(tree.intensity, e.node))
         total = luminance(acc.rad) + np.bincount(e.pt, est, n_pts)
         err, thr = _criterion(e, est, total, error_mode, max_error, abs_floor)
         budget = max_cut_size - acc.count - np.bincount(e.pt, minlength=n_pts)

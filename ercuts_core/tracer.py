@@ -169,6 +169,8 @@ class Tracer:
         seg = o1 - o0
         dist = np.sqrt(np.einsum("ij,ij->i", seg, seg))
         ok = dist > 0
+        if ok.all():  # the usual case: no zero-length segment to guard
+            return ~self.occluded(o0, seg / dist[:, None], dist * (1.0 - 1e-6))
         dirs = np.where(ok[:, None], seg / np.where(ok, dist, 1.0)[:, None], 0.0)
         dirs[~ok, 2] = 1.0
         tmax = np.where(ok, dist * (1.0 - 1e-6), 0.0)

@@ -300,9 +300,16 @@ def why_missed(scene, budget, g, refs, budgets, worst_ratio=None) -> list[str]:
         notes.append(f"ERCUTS's error is {100 * b / tot:.0f} % bias² and {100 * v / tot:.0f} % variance "
                      f"(from the {len(er)} seeds: relMSE of each vs. of their mean)")
         if b > v:
-            notes.append("bias dominates, so more time alone will not close it: the VPL geometry "
-                         f"clamp (clamp={_setting(er, 'clamp', 0.02)}) and the diffuse-VPL approximation "
-                         "are the biased steps; a smaller clamp or bias compensation would")
+            notes.append("bias dominates, so more time alone will not close it (ERCUTS's biased steps: "
+                         f"the VPL geometry clamp, clamp={_setting(er, 'clamp', 0.02)}; diffuse VPLs at "
+                         "glossy x2; cut caps, below)")
+    energy = med(er, "energy")
+    if abs(energy - 1) > TARGET_ENERGY and (scene, "BDPT", budget) in g:
+        notes.append(f"energy {energy:.3f} against BDPT's {med(g[(scene, 'BDPT', budget)], 'energy'):.3f} "
+                     "at the same budget, so the difference comes from ERCUTS's VPL steps, not the scene or units"
+                     if abs(med(g[(scene, 'BDPT', budget)], 'energy') - 1) <= TARGET_ENERGY else
+                     f"BDPT's energy is also off ({med(g[(scene, 'BDPT', budget)], 'energy'):.3f}) at this "
+                     "budget: too few samples to judge")
     caps = [r["stats"].get("cut_cap_for_time_limit") for r in er]
     caps = [c for c in caps if c]
     if caps:
@@ -328,7 +335,7 @@ def why_missed(scene, budget, g, refs, budgets, worst_ratio=None) -> list[str]:
     slope = convergence_slope(g, scene, "ERCUTS", budgets)
     if slope is not None:
         notes.append(f"ERCUTS's relMSE falls ∝ t^{slope:.2f} between {min(budgets):g} s and {max(budgets):g} s")
-        if worst_ratio and slope < -0.05 and worst_ratio > 1:
+        if worst_ratio and slope < -0.05 and worst_ratio > 1 and not b > v:
             speed = worst_ratio ** (-1.0 / slope)
             notes.append(f"at that slope ERCUTS would need a {speed:.1f}× speed-up (same error in "
                          f"1/{speed:.1f} of the time) to meet the ratio target")
@@ -406,8 +413,8 @@ def target_lines(g, refs, scenes, budgets) -> list[str]:
     if missed:
         lines += ["", "### Why targets were missed (computed from the runs)", ""]
         for s, b, fails, worst in missed:
-            lines.append(f"- **{s}, {b:g} s** — " + "; ".join(fails) + ". "
-                         + "; ".join(why_missed(s, b, g, refs, budgets, worst)) + ".")
+            why = "; ".join(why_missed(s, b, g, refs, budgets, worst))
+            lines.append(f"- **{s}, {b:g} s** — " + "; ".join(fails) + ". " + why[:1].upper() + why[1:] + ".")
     return lines
 
 

@@ -127,10 +127,6 @@ def test_engine_error_fails_with_message_on_stderr(node):
     assert not out.exists() or not os.listdir(out)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "engine.ErcutsRenderEngine._error_message imports .export (which imports numpy) outside its "
-    "try block: without numpy that second ImportError escapes render(), so Blender writes a black "
-    "frame and exits 0. Remove this marker once the engine guards that import."))
 def test_missing_dependencies_fail_with_a_clear_message(node):
     """Debian's Blender without PYTHONPATH has no numpy: the render must fail (non-zero exit,
     the missing module named, no file) instead of writing a black frame."""

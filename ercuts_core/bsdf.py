@@ -275,8 +275,8 @@ class Bsdf:
 
     def _flipped_normals(self, wo: F64) -> tuple[F64, F64]:
         """(ns, ng) flipped per lane onto the side of wo (two-sided surfaces)."""
-        flip = (_dot(wo, self.ng) < 0.0)[:, None]
-        return np.where(flip, -self.ns, self.ns), np.where(flip, -self.ng, self.ng)
+        sign = np.where(_dot(wo, self.ng) < 0.0, -1.0, 1.0)[:, None]   # ×(±1) is exact
+        return self.ns * sign, self.ng * sign
 
     def _eval_pdf(self, wo: F64, wi: F64, flipped: tuple[F64, F64] | None = None
                   ) -> tuple[F64, F64, F64, B]:
@@ -291,8 +291,8 @@ class Bsdf:
                  & (_dot(wo, ng) > COS_EPS) & (_dot(wi, ng) > COS_EPS))
         if self.all_diffuse:
             # Lambert only: f = kd/π, pdf = cos_i/π on the valid set (see all_diffuse).
-            f = np.where(valid[:, None], self.kd * INV_PI, 0.0)
-            return f, np.where(valid, cos_i * INV_PI, 0.0), cos_i, valid
+            w = np.where(valid, INV_PI, 0.0)          # kd ≥ 0 finite: kd·0 = +0 exactly
+            return self.kd * w[:, None], np.where(valid, cos_i * INV_PI, 0.0), cos_i, valid
         # Half vector terms; wo + wi is computed the same way for (wo, wi) and (wi, wo)
         h_len = np.sqrt(_dot(wo + wi, wo + wi))
         cos_h = np.clip(_div(cos_o + cos_i, h_len), 0.0, 1.0)

@@ -268,7 +268,12 @@ def write_report(data: dict) -> None:
         lines.append("")
     if len(runs) == 2:
         lines += ["## Before → after (end-to-end Mrays/s, embreex share)", "",
-                  "| scene | integrator | phase | before | after | speed-up |", "|---|---|---|---|---|---|"]
+                  "*Load-normalised speed-up* = after/before embreex share: embreex alone is replayed "
+                  "right after each render, so on a loaded machine it slows down with the render and "
+                  "the ratio of shares is a fairer speed-up than the ratio of wall times. Ray counts "
+                  "can differ between runs (other changes to batch sizes change the random streams).", "",
+                  "| scene | integrator | phase | before | after | wall speed-up | load-normalised speed-up |",
+                  "|---|---|---|---|---|---|---|"]
         before = {(c["scene"], c["integrator"]): c for c in runs[0][1]["cases"]}
         for case in runs[1][1]["cases"]:
             b = before.get((case["scene"], case["integrator"]))
@@ -282,7 +287,8 @@ def write_report(data: dict) -> None:
                     f"| {case['scene']} | {case['integrator']} | {ph} "
                     f"| {_fmt(rb['mrays_s'])} ({_fmt(100 * rb['embreex_share'], '.0f')} %) "
                     f"| {_fmt(r['mrays_s'])} ({_fmt(100 * r['embreex_share'], '.0f')} %) "
-                    f"| {_fmt(rb['wall_s'] / r['wall_s'] if r['wall_s'] else float('nan'))}× wall |")
+                    f"| {_fmt(rb['wall_s'] / r['wall_s'] if r['wall_s'] else float('nan'))}× "
+                    f"| {_fmt(r['embreex_share'] / rb['embreex_share'] if rb['embreex_share'] else float('nan'))}× |")
         lines.append("")
     last = runs[-1][1]
     if any("profile" in c for c in last["cases"]):
@@ -318,9 +324,16 @@ def main(argv=None) -> None:
     ap.add_argument("--no-profile", action="store_true")
     ap.add_argument("--only", default="", help="comma-separated integrators to run")
     ap.add_argument("--cap", type=int, default=4_000_000, help="rays recorded per phase and kind")
+    ap.add_argument("--report-only", action="store_true", help="rewrite the markdown from the JSON")
+    ap.add_argument("--commit", default="", help="commit to record (default: git rev-parse HEAD)")
     args = ap.parse_args(argv)
+    path = os.path.join(OUT, "tracer_efficiency.json")
+    if args.report_only:
+        with open(path) as fh:
+            write_report(json.load(fh))
+        return
     only = {s.strip().upper() for s in args.only.split(",") if s.strip()}
-    run = {"meta": {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": _commit(),
+    run = {"meta": {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": args.commit or _commit(),
                     "load_avg": os.getloadavg()[0]}, "cases": []}
     for name, make, integ, settings in cases(args.quick):
         if only and integ not in only:
@@ -334,7 +347,6 @@ def main(argv=None) -> None:
         print(f"{name:12s} {integ:6s} {time.perf_counter() - t0:6.1f} s  " + "  ".join(
             f"{k}: {v['mrays_s']:.2f} Mr/s emb {100 * v['embreex_share']:.0f}%" for k, v in ph.items()
             if v["rays"]), flush=True)
-    path = os.path.join(OUT, "tracer_efficiency.json")
     data = {}
     if os.path.exists(path):
         with open(path) as fh:

@@ -204,7 +204,7 @@ def test_emissive_zero_area_faces_are_silent_and_counted(tmp_path):
 
 def test_material_without_node_tree_uses_viewport_colour_silently(tmp_path):
     mat = bpy.data.materials.new("NoNodes")
-    if hasattr(mat, "use_nodes") and bpy.app.version < (5, 0, 0):
+    if bpy.app.version < (5, 0, 0):
         mat.use_nodes = False
     mat.diffuse_color = (0.8, 0.1, 0.1, 1.0)
     lit_scene(material=mat)

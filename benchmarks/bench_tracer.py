@@ -78,6 +78,10 @@ CHANGES = [
     "(with the changes above).",
     "paths/mutations: `slot_rows` (one flat np.take) instead of `a[rows, i]` on per-path vertex slots "
     "(13.3 → 4.9 ms per 10⁵ rows); ERCUTS image bit-identical.",
+    "lightcuts refinement/accumulation gathers by take_rows; `Tracer.visible` skips the zero-length "
+    "guards when no segment is degenerate (lightcut micro-benchmark within noise).",
+    "bsdf: two-sided flip as ×(±1) instead of np.where (exact; 13 → 3 ms per 2^17 lanes). Cornell BDPT "
+    "4 spp: 1.01–1.08 → 0.86–0.91 s (with the paths/mutations change).",
 ]
 
 #: What the profiles say is left (not asserted; re-read the profiles after a re-run).

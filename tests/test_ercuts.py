@@ -106,3 +106,47 @@ def test_cancel_in_each_phase_returns_an_image(phase):
     r = render(closed_room(24, 18), RenderSettings(**FAST, seed=5), progress)
     assert r.cancelled
     assert r.image.shape == (18, 24, 4) and np.isfinite(r.image).all()
+
+
+def test_gather_order_is_a_permutation_of_coherent_runs():
+    from ercuts_core.integrators.ercuts import GATHER_RUN, _spread_order
+
+    pts = np.flatnonzero(np.random.default_rng(0).random(5000) < 0.7)
+    order = _spread_order(pts, seed=3)
+    np.testing.assert_array_equal(np.sort(order), pts)                  # every point once
+    np.testing.assert_array_equal(order, _spread_order(pts, seed=3))     # deterministic
+    # a run is GATHER_RUN consecutive entries of pts (neighbouring pixels), except the short last run
+    pos = np.searchsorted(pts, order)
+    steps = np.diff(pos)
+    assert np.mean(steps == 1) > 1 - 1.5 / GATHER_RUN
+    # the first batch (256 points) samples the whole image, not its first rows
+    assert pos[:256].max() - pos[:256].min() > 0.8 * len(pts)
+
+
+def test_gather_pace_raises_the_error_then_caps_and_recovers():
+    from ercuts_core.integrators.ercuts import MAX_PACED_ERROR, GatherPace
+
+    pace = GatherPace(0.02, 1000)
+    pace.update(256, 1.0, 500.0, 10_000, float("inf"))                   # no time limit
+    assert (pace.error, pace.cap) == (0.02, 1000)
+    pace.update(256, 0.256, 500.0, 10_000, 20.0)                        # 1 ms/pt, 10 s of 18: on time
+    assert (pace.error, pace.cap) == (0.02, 1000)
+    pace.update(256, 0.256, 500.0, 10_000, 2.0)                         # 5.6× behind schedule
+    assert pace.error == pytest.approx(0.02 * 10 / 1.8) and pace.cap == 1000
+    pace.update(256, 0.256, 100.0, 10_000, 0.18)                        # still behind at the largest ε
+    assert pace.error == MAX_PACED_ERROR
+    pace.update(256, 0.256, 100.0, 10_000, 1.0)                         # only now the cap
+    assert pace.error == MAX_PACED_ERROR and pace.cap == int(100 / (10 / 0.9))
+    cap = pace.cap
+    pace.update(256, 0.0256, float(cap), 10_000, 10.0)                  # far ahead: lift the cap first
+    assert pace.error == MAX_PACED_ERROR and pace.cap > cap
+    for _ in range(5):
+        pace.update(256, 0.0256, float(pace.cap), 10_000, 10.0)
+    assert pace.cap == 1000 and pace.error < MAX_PACED_ERROR              # then lower ε again
+    for _ in range(10):
+        pace.update(256, 0.001, 10.0, 10_000, 10.0)
+    assert pace.error == 0.02                                            # never below max_error
+    stats = {}
+    pace.record(stats, 256 * 16)
+    assert stats["max_error_for_time_limit"] == MAX_PACED_ERROR and stats["cut_cap_for_time_limit"] == cap
+    assert 0 < stats["paced_points_for_time_limit"] < 1

@@ -17,8 +17,11 @@ fallback of VPLs that lit no sampled pixel.
 
 Time: with ``time_limit`` > 0 each phase gets a share of the time left (rough BDPT 15 %,
 chains 30 %, VPL normalisation 15 % — fewer E1 samples per VPL if needed — and the rest for
-the gather, whose cut-size cap is fitted to the time left after each batch); a phase that
-runs out stops cleanly (fewer passes, shorter chains, smaller cuts) and the stats say so.
+the gather, paced by :class:`GatherPace`: the shading points are gathered in a shuffled
+order of short runs, so every batch is a sample of the whole image, and after each batch
+the lightcut error threshold is raised (or lowered back toward ``max_error``) so the rest
+fits the time left; only above :data:`MAX_PACED_ERROR` is the cut size capped); a phase that
+runs out stops cleanly (fewer passes, shorter chains, coarser cuts) and the stats say so.
 
 Progress and cancellation (api.md): messages start with the phase ("BDPT", "ER chains",
 "VPLs", "Light tree", "Lightcuts", fractions in :data:`PHASES`); previews show the rough
@@ -93,6 +96,11 @@ PROGRESS_GATHER_POINTS = 512
 PROGRESS_E1_CHUNK = 1 << 16
 #: Shading points whose specular lobe has a roughness below this count as glossy (er_caustic).
 GLOSSY_ROUGHNESS = 0.5
+#: Largest lightcut error threshold the time limit may ask for; past it the cut size is
+#: capped instead (cuts of a few clusters show their representatives as streaks).
+MAX_PACED_ERROR = 0.25
+#: Consecutive shading points kept together in the shuffled gather order (coherent rays).
+GATHER_RUN = 32
 
 
 class ErcutsIntegrator:
@@ -326,7 +334,7 @@ class ErcutsIntegrator:
         L = np.zeros((2, Q, 3))              # [from emitter VPLs, from the others]
         cut = np.zeros(Q)
         done_pt = ~g.valid                   # misses need no gather
-        pts_all = np.flatnonzero(g.valid)
+        pts_all = _spread_order(np.flatnonzero(g.valid), s.seed)
         if len(vpls) == 0:
             pts_all = pts_all[:0]
         # Absolute error floor (algorithm.md §G.6; not in the papers): below a small fraction
@@ -339,8 +347,7 @@ class ErcutsIntegrator:
         rays = 0
         clamped = 0.0
         done = 0
-        cap = s.max_cut_size
-        t_start = time.perf_counter()
+        pace = GatherPace(s.max_error, s.max_cut_size)
 
         def report(f_done):
             f = f_done / max(len(pts_all), 1)
@@ -353,10 +360,11 @@ class ErcutsIntegrator:
         edges = np.unique(np.r_[0, np.arange(min(256, len(pts_all)), len(pts_all), step), len(pts_all)])
         for start, stop in zip(edges[:-1], edges[1:]):
             idx = pts_all[start:stop]
+            t_batch = time.perf_counter()
             pts = self._shading_points(g, idx, f_bound)
             if s.gather == "LIGHTCUTS":
                 res = lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
-                               max_error=s.max_error, max_cut_size=cap, clamp=clamp,
+                               max_error=pace.error, max_cut_size=pace.cap, clamp=clamp,
                                abs_floor=floor, return_cut=True, on_round=lambda: report(start))
                 em = _sum_rows(res.cut_point, res.cut_estimate * share[res.cut_node], len(idx))
                 L[0, idx], L[1, idx], cut[idx] = em, res.radiance - em, res.cut_size
@@ -371,15 +379,14 @@ class ErcutsIntegrator:
                 rays += len(idx) * len(vpls)
             done = start + len(idx)
             done_pt[idx] = True
-            cap = self._fit_cap(cap, cut[idx].mean(), done, len(pts_all) - done,
-                                time.perf_counter() - t_start, clock.remaining())
+            pace.update(len(idx), time.perf_counter() - t_batch, cut[idx].mean(),
+                        len(pts_all) - done, clock.remaining())
             if not report(done) and done < len(pts_all):
                 stats["gather_incomplete"] = 1
                 clock.cancelled = True
                 break
             show(L, done_pt.reshape(-1, S).all(axis=1))
-        if cap < s.max_cut_size:
-            stats["cut_cap_for_time_limit"] = cap
+        pace.record(stats, done)
         valid_cut = cut[pts_all[:done]] if done else np.zeros(1)
         stats["cut_size_mean"] = float(valid_cut.mean()) if done else 0.0
         stats["cut_size_max"] = int(valid_cut.max()) if done else 0
@@ -400,21 +407,6 @@ class ErcutsIntegrator:
             bsdf = Bsdf.from_table(table, g.mat[h], g.ns[h], g.ng[h])
             out[h] = ~bsdf.is_diffuse & (np.asarray(table.roughness)[g.mat[h]] < GLOSSY_ROUGHNESS)
         return out
-
-    @staticmethod
-    def _fit_cap(cap: int, mean_cut: float, done: int, left: int, elapsed: float, remaining: float) -> int:
-        """Lower the cut-size cap so that the rest of the gather fits the time left.
-
-        A complete image with smaller cuts beats a partial one; the cost per point is
-        taken as proportional to the mean cut size so far.
-        """
-        if left == 0 or not np.isfinite(remaining) or done == 0:
-            return cap
-        projected = elapsed / done * left
-        if projected <= remaining:
-            return cap
-        scale = max(remaining, 0.0) / projected * 0.8
-        return int(max(1, min(cap, mean_cut * scale)))
 
     def _shading_points(self, g: GBuffer, idx: NDArray, f_bound: NDArray) -> ShadingPoints:
         scene = self.scene
@@ -513,6 +505,62 @@ class ErcutsIntegrator:
         n = vpls.normal[k] * np.where(dot(vpls.normal[k], eye - p) < 0, -1.0, 1.0)[:, None]
         vis = scene.tracer.visible(p, n, np.ascontiguousarray(eye), None)
         return np.bincount((iy * window.width + ix)[k[vis]], minlength=window.n_pixels).astype(np.float64)
+
+
+class GatherPace:
+    """Lightcut error threshold and cut cap for the next gather batch under a time limit.
+
+    After each batch the cost per point c at the current threshold ε is measured and the
+    rest is projected, T = c·left. Lightcut cost falls roughly as 1/ε (cut sizes in
+    ``benchmarks/results/lightcuts_scaling.md``), so ε ← ε·T/(0.9·remaining) keeps the
+    gather on schedule in both directions, within [``max_error``, :data:`MAX_PACED_ERROR`];
+    only when even that ε is too slow is the cut size capped (cap ← mean cut·0.9·remaining/T),
+    and the cap is lifted before ε is lowered. Without a time limit nothing changes.
+    """
+
+    def __init__(self, max_error: float, max_cut_size: int):
+        self.min_error, self.max_cut_size = max_error, max_cut_size
+        self.error, self.cap = max_error, max_cut_size
+        self.points_paced = 0          # points gathered with a raised threshold or a cap
+        self.largest_error, self.smallest_cap = max_error, max_cut_size
+
+    def update(self, n: int, seconds: float, mean_cut: float, left: int, remaining: float) -> None:
+        """Pace the next batch from the one just gathered (``n`` points in ``seconds`` with
+        the current threshold and cap, mean cut ``mean_cut``; ``left`` points to go)."""
+        if self.error > self.min_error or self.cap < self.max_cut_size:
+            self.points_paced += n
+        if n == 0 or left == 0 or not np.isfinite(remaining):
+            return
+        ratio = seconds / n * left / max(0.9 * remaining, 1e-6)   # > 1: behind schedule
+        if ratio > 1.0 and self.error >= MAX_PACED_ERROR:
+            self.cap = int(max(1, min(self.cap, mean_cut / ratio)))
+        elif ratio < 1.0 and self.cap < self.max_cut_size:
+            self.cap = int(min(self.max_cut_size, max(self.cap + 1, self.cap / ratio)))
+        else:
+            self.error = float(np.clip(self.error * ratio, self.min_error, MAX_PACED_ERROR))
+        self.largest_error = max(self.largest_error, self.error)
+        self.smallest_cap = min(self.smallest_cap, self.cap)
+
+    def record(self, stats: dict, done: int) -> None:
+        """Stats of a paced gather: the largest threshold and smallest cap used, and the
+        share of the ``done`` points gathered with either."""
+        if self.points_paced:
+            stats["paced_points_for_time_limit"] = self.points_paced / max(done, 1)
+        if self.largest_error > self.min_error:
+            stats["max_error_for_time_limit"] = self.largest_error
+        if self.smallest_cap < self.max_cut_size:
+            stats["cut_cap_for_time_limit"] = self.smallest_cap
+
+
+def _spread_order(points: NDArray, seed: int) -> NDArray:
+    """``points`` in a shuffled order of runs of :data:`GATHER_RUN` (deterministic per
+    seed): every gather batch samples the whole image (for pacing and an even partial
+    image) while neighbouring points stay together (coherent shadow rays)."""
+    runs = np.arange(0, len(points), GATHER_RUN)
+    order = np.random.default_rng([seed, 0x6A7]).permutation(len(runs))
+    starts = runs[order]
+    idx = (starts[:, None] + np.arange(GATHER_RUN)[None, :]).ravel()
+    return points[idx[idx < len(points)]]
 
 
 @dataclass

@@ -14,7 +14,7 @@ so far (``framebuffer.show_preview``); in background mode one line is printed pe
 phase. The final image goes into Combined and the view layer's enabled passes
 (:mod:`.passes`, declared in ``update_render_passes``); optionally a JSON statistics
 file is written next to the frame (:mod:`.sidecar`). Preview thumbnails
-(``is_preview``) use :func:`preview_settings`.
+(``is_preview``) use :func:`preview_settings`, without passes, border or statistics.
 """
 from __future__ import annotations
 
@@ -79,10 +79,12 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         self._stats_prefix = ""
         self._layer_name = ""
         self._phase = None
+        self._user_cancelled = False
 
     # ------------------------------------------------------------------ entry point
     def render(self, depsgraph):
         self._start = time.monotonic()
+        self._user_cancelled = False
         try:
             self._render(depsgraph)
         except Exception as exc:  # noqa: BLE001 - every failure must reach the user
@@ -122,7 +124,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         """Core settings for this render: animated seed, preview thumbnail limits."""
         ercuts = scene.ercuts
         settings = ercuts.to_core(seed=ercuts.seed_for_frame(scene.frame_current))
-        return preview_settings(settings) if self.is_preview else settings
+        return preview_settings(settings) if self._is_preview() else settings
 
     def _render(self, depsgraph):
         from . import compat
@@ -139,7 +141,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         if not view_layer.use:  # Blender skips disabled layers itself; never render one
             return
         settings = self._settings(scene)
-        enabled = [] if self.is_preview else passes.enabled_passes(scene, view_layer)
+        enabled = [] if self._is_preview() else passes.enabled_passes(scene, view_layer)
         for p in enabled:  # before begin_result (a registered pass is not added twice)
             self.add_pass(p.name, p.channels, p.chan_id, layer=layer_name)
         self._layer_name = layer_name
@@ -151,7 +153,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
             exported = export_scene(
                 depsgraph, camera_override=self.camera_override,
                 size=(self.resolution_x, self.resolution_y),
-                use_border=False if self.is_preview else None,
+                use_border=False if self._is_preview() else None,
                 should_stop=self._should_stop)
         except ExportCancelled:
             return
@@ -172,7 +174,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         elapsed = time.monotonic() - self._start
         self.update_stats("Ercuts", f"{self._stats_prefix}{result.summary()} | "
                                     f"{_format_time(elapsed)}")
-        if not self.is_preview:
+        if not self._is_preview():
             self._report(scene, layer_name, exported, result, settings, images, missing,
                          elapsed, progressive=bool(kwargs))
 
@@ -188,7 +190,11 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
             export_stats=dict(exported.stats), stats=dict(result.stats), passes=list(images),
             missing_passes=[p.name for p in missing], progressive=progressive,
             layer=layer_name)
-        if scene.ercuts.write_sidecar:
+        if scene.ercuts.write_sidecar and self._user_cancelled:
+            # Blender writes no image for a cancelled frame; its statistics file (maybe of
+            # an earlier good render) stays as it is too.
+            print("Ercuts: render cancelled: statistics file not written")
+        elif scene.ercuts.write_sidecar:
             last_render["sidecar"] = self._write_sidecar(scene, layer_name, result, settings,
                                                          exported, warnings, elapsed)
         if warnings:
@@ -260,7 +266,15 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
             if bpy.app.background:
                 print(f"Ercuts: {self._layer_name} | {phase} | "
                       f"{fraction:4.0%} | {_format_time(elapsed)}", flush=True)
-        return not self._should_stop()
+        if self._should_stop():
+            self._user_cancelled = True
+        return not self._user_cancelled
+
+    def _is_preview(self) -> bool:
+        """True for material/world/light preview thumbnails; a Python-level hook (like
+        :meth:`_should_stop`), so tests can take the thumbnail path headless, where Blender
+        renders no previews."""
+        return bool(self.is_preview)
 
     def _should_stop(self) -> bool:
         """True when the user cancelled (Esc); a Python-level hook, so tests can stand in."""

@@ -85,6 +85,35 @@ def test_preview_settings_are_cheap():
     assert ErcutsRenderEngine.bl_use_preview is True
 
 
+def test_preview_render_takes_the_cheap_path(tmp_path, monkeypatch):
+    """A thumbnail render (``is_preview``; Blender renders none headless, so the engine's
+    Python hook stands in): the core gets the preview settings whatever the scene asks for,
+    the image is lit, and no passes, statistics file or ``last_render`` record are made."""
+    import ercuts_core
+
+    got = []
+    core = ercuts_core.render
+
+    def spy(desc, settings, *args, **kwargs):
+        got.append(settings)
+        return core(desc, settings, *args, **kwargs)
+
+    monkeypatch.setattr(ercuts_core, "render", spy)
+    monkeypatch.setattr(ErcutsRenderEngine, "_is_preview", lambda self: True)
+    s = _scene(samples=512, integrator="ERCUTS")
+    h.uv_sphere("Ball", radius=1.0, location=(0, 0, 1), material=h.diffuse("Ball", (0.8, 0.2, 0.2)))
+    s.ercuts.max_depth = 16
+    s.ercuts.write_sidecar = True
+    s.view_layers[0].use_pass_z = True
+    engine_module.last_render.clear()
+    img = h.render_exr(tmp_path / "thumb.exr")
+    assert len(got) == 1 and got[0].integrator == "PATH"
+    assert got[0].samples <= 8 and got[0].max_depth <= 4 and 0 < got[0].time_limit <= 2.0
+    assert img.shape == (H, W, 4) and img[..., :3].mean() > 0.01
+    assert engine_module.last_render == {}
+    assert not list(tmp_path.glob("*.json"))
+
+
 # --------------------------------------------------------------------------- progress
 
 def test_phase_of_messages():
@@ -255,6 +284,22 @@ def test_sidecar_of_still_with_ercuts_statistics(tmp_path):
     layer = data["layers"]["ViewLayer"]
     assert layer["settings"]["integrator"] == "ERCUTS"
     assert layer["vpl"] and layer["cuts"]  # VPL and cut statistics of the core's report
+
+
+def test_cancelled_render_keeps_the_earlier_sidecar(tmp_path, monkeypatch):
+    """Esc during a frame: Blender writes no image, and the frame's statistics file from
+    the earlier good render is not replaced by the cancelled one's."""
+    s = _scene(samples=2)
+    s.ercuts.write_sidecar = True
+    h.render_exr(tmp_path / "frame.exr")
+    path = tmp_path / "frame.ercuts.json"
+    good = path.read_bytes()
+    assert json.loads(good)["layers"]["ViewLayer"]["cancelled"] is False
+    monkeypatch.setattr(ErcutsRenderEngine, "_should_stop", lambda self: True)
+    s.ercuts.samples = 50
+    h.render_exr(tmp_path / "frame.exr")
+    assert engine_module.last_render["cancelled"] is True and "sidecar" not in engine_module.last_render
+    assert path.read_bytes() == good
 
 
 def test_no_sidecar_by_default(tmp_path):

@@ -47,6 +47,18 @@ _Y_EPS = 1e-9
 _PARALLEL_KNN = 1 << 15
 #: Angular padding (radians) added to freshly merged cones against round-off.
 _CONE_PAD = 1e-7
+#: Points per K-nearest-neighbour query chunk; ``keep_going`` is polled between chunks
+#: (tens of ms each), so a cancel inside the first, largest level is noticed promptly.
+_KNN_CHUNK = 1 << 16
+
+
+class _Stopped(Exception):
+    """``keep_going`` returned False during the build."""
+
+
+def _poll(keep_going, fraction: float) -> None:
+    if keep_going is not None and keep_going(fraction) is False:
+        raise _Stopped
 
 
 def luminance(rgb: NDArray) -> NDArray:
@@ -171,13 +183,19 @@ def ercuts_weight(p_i: NDArray, n_i: NDArray, y_i: NDArray,
     return (y_i + y_j) * (2.0 - np.einsum("ij,ij->i", n_i, n_j)) * dist
 
 
-def _candidate_edges(pos: NDArray, k: int) -> tuple[NDArray, NDArray]:
-    """Symmetric, deduplicated K-nearest-neighbour edges (lo < hi) over (m,3) points."""
+def _candidate_edges(pos: NDArray, k: int, keep_going=None,
+                     fraction: float = 0.0) -> tuple[NDArray, NDArray]:
+    """Symmetric, deduplicated K-nearest-neighbour edges (lo < hi) over (m,3) points
+    (queried in chunks of :data:`_KNN_CHUNK`, polling ``keep_going(fraction)`` between)."""
     m = len(pos)
     kq = min(k + 1, m)
     workers = -1 if m >= _PARALLEL_KNN else 1
-    _, nb = cKDTree(pos).query(pos, k=kq, workers=workers)
-    nb = nb.reshape(m, kq)
+    kd = cKDTree(pos)
+    nb = np.empty((m, kq), np.int64)
+    for start in range(0, m, _KNN_CHUNK):
+        _poll(keep_going, fraction)
+        _, found = kd.query(pos[start:start + _KNN_CHUNK], k=kq, workers=workers)
+        nb[start:start + _KNN_CHUNK] = np.asarray(found).reshape(-1, kq)
     src = np.repeat(np.arange(m), kq)
     dst = nb.ravel()
     ok = (dst != src) & (dst < m)
@@ -246,7 +264,7 @@ def _morton_pairs(pos: NDArray) -> tuple[NDArray, NDArray]:
 
 
 def _match_level(pos: NDArray, axis: NDArray, lum: NDArray, k: int, max_rounds: int,
-                 min_pairs: float) -> tuple[NDArray, NDArray]:
+                 min_pairs: float, keep_going=None, fraction: float = 0.0) -> tuple[NDArray, NDArray]:
     """Pairs (a, b) of active clusters for one tree level (local indices).
 
     If fewer than 1/4 of the clusters got paired (adversarial inputs: long chains of
@@ -254,7 +272,7 @@ def _match_level(pos: NDArray, axis: NDArray, lum: NDArray, k: int, max_rounds: 
     the unpaired ones are also paired along a Morton curve, so every level shrinks
     the active set by a constant factor.
     """
-    lo, hi = _candidate_edges(pos, k)
+    lo, hi = _candidate_edges(pos, k, keep_going, fraction)
     lum = lum + _Y_EPS * max(float(lum.max()), 1e-300)      # Y = 0 pairs: by distance
     w = ercuts_weight(pos[lo], axis[lo], lum[lo], pos[hi], axis[hi], lum[hi])
     a, b = greedy_matching(len(pos), lo, hi, w, max_rounds, min_pairs)
@@ -343,7 +361,7 @@ def _finish(bd: _Builder, n: int, root: int) -> LightTree:
 
 def build_light_tree(position: NDArray, normal: NDArray, intensity: NDArray, seed: int = 0,
                      *, k_neighbors: int = 8, pairing: str = "ploc",
-                     max_match_rounds: int = 64) -> LightTree:
+                     max_match_rounds: int = 64, keep_going=None) -> LightTree | None:
     """Build the Ercuts light tree over N oriented VPLs.
 
     Args:
@@ -358,9 +376,13 @@ def build_light_tree(position: NDArray, normal: NDArray, intensity: NDArray, see
             until no candidate edge is left (the paper's "cheapest pair first" until all
             are paired); leftovers without an unpaired candidate carry up.
         max_match_rounds: cap on mutual-best rounds per level.
+        keep_going: optional ``keep_going(fraction) -> bool | None``, polled between
+            neighbour-query chunks and levels (``fraction`` ≈ share of the clusters
+            merged so far); False stops the build.
 
     Returns:
-        The :class:`LightTree` (empty, root −1, for N = 0).
+        The :class:`LightTree` (empty, root −1, for N = 0), or None when ``keep_going``
+        stopped the build.
     """
     if pairing not in ("ploc", "greedy"):
         raise ValueError(f"pairing must be 'ploc' or 'greedy', not {pairing!r}")
@@ -372,15 +394,20 @@ def build_light_tree(position: NDArray, normal: NDArray, intensity: NDArray, see
     rng = np.random.default_rng(seed)
     active = np.arange(n)
     lvl = 0
-    while len(active) > 1:
-        lvl += 1
-        min_pairs = len(active) / 4 if pairing == "ploc" else np.inf
-        a, b = _match_level(bd.cen[active], bd.axis[active], bd.lum[active],
-                            k_neighbors, max_match_rounds, min_pairs)
-        parents = bd.merge(active[a], active[b], lvl, rng)
-        unmatched = np.ones(len(active), dtype=bool)
-        unmatched[a] = False
-        unmatched[b] = False
-        active = np.concatenate([parents, active[unmatched]])
+    try:
+        while len(active) > 1:
+            lvl += 1
+            min_pairs = len(active) / 4 if pairing == "ploc" else np.inf
+            a, b = _match_level(bd.cen[active], bd.axis[active], bd.lum[active],
+                                k_neighbors, max_match_rounds, min_pairs,
+                                keep_going, 1.0 - len(active) / n)
+            parents = bd.merge(active[a], active[b], lvl, rng)
+            unmatched = np.ones(len(active), dtype=bool)
+            unmatched[a] = False
+            unmatched[b] = False
+            active = np.concatenate([parents, active[unmatched]])
+            _poll(keep_going, 1.0 - len(active) / n)
+    except _Stopped:
+        return None
     root = int(active[0]) if n else -1
     return _finish(bd, n, root)

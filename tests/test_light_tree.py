@@ -224,3 +224,24 @@ def test_cone_union_contains_both_cones() -> None:
         assert np.all(np.einsum("ij,ij->i", axis, d) >= cos - 1e-9)
     # and it is not trivially the whole sphere
     assert np.mean(cos > -1.0) > 0.5
+
+
+def test_keep_going_is_polled_and_can_stop_the_build() -> None:
+    """The build polls keep_going between K-NN chunks and levels (fractions rising in
+    [0, 1]); a False stops it (None); always True builds the same tree as no callback."""
+    from ercuts_core import light_tree
+
+    rng = np.random.default_rng(4)
+    n = 3 * light_tree._KNN_CHUNK // 2
+    pos, nrm = rng.random((n, 3)), np.tile([0.0, 0.0, 1.0], (n, 1))
+    inten = rng.random((n, 3))
+    seen = []
+    tree = build_light_tree(pos, nrm, inten, seed=1, keep_going=lambda f: seen.append(f) or True)
+    plain = build_light_tree(pos, nrm, inten, seed=1)
+    for name in ("left", "right", "rep", "intensity", "bmin", "bmax"):
+        np.testing.assert_array_equal(getattr(tree, name), getattr(plain, name))
+    assert seen[:2] == [0.0, 0.0]                        # two query chunks in the first level
+    assert len(seen) >= 2 * tree.height and seen == sorted(seen) and 0 <= seen[-1] <= 1
+    calls = []
+    assert build_light_tree(pos, nrm, inten, keep_going=lambda f: calls.append(f) or len(calls) < 2) is None
+    assert len(calls) == 2                               # stopped inside the first level

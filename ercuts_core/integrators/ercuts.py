@@ -179,11 +179,13 @@ class ErcutsIntegrator:
         # 4. Light tree.
         t0 = time.perf_counter()
         tree = None
+        label = f"| {len(vpls)} VPLs"
         if s.gather == "LIGHTCUTS" and len(vpls):
-            clock.report(self._fraction("Light tree", 0.0), f"Light tree | {len(vpls)} VPLs")
-            tree = build_light_tree(vpls.position, vpls.normal, vpls.intensity, seed=s.seed)
+            tree = build_light_tree(vpls.position, vpls.normal, vpls.intensity, seed=s.seed,
+                                    keep_going=lambda f: clock.report(
+                                        self._fraction("Light tree", f), f"Light tree {100 * f:.0f}% {label}"))
         timings["tree"] = time.perf_counter() - t0
-        if not clock.report(self._fraction("Light tree", 1.0), f"Light tree | {len(vpls)} VPLs"):
+        if clock.cancelled or not clock.report(self._fraction("Light tree", 1.0), f"Light tree {label}"):
             film.merge(rough)
             return
         # 5. Lightcuts (or the brute-force ablation).

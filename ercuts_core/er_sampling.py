@@ -120,7 +120,7 @@ def _pick_mutation(app: NDArray, u: NDArray) -> NDArray:
 
 def run_chains(ctx: MutationContext, seeds: PathBatch, starts: NDArray, n_steps: int,
                enabled: tuple[bool, bool, bool, bool], rng: np.random.Generator,
-               keep_going=lambda fraction: True) -> ChainResult:
+               keep_going=lambda fraction: True, interrupt=None) -> ChainResult:
     """Run ``starts[i]`` chains of ``n_steps`` from each seed path, all in lock-step.
 
     Args:
@@ -128,6 +128,9 @@ def run_chains(ctx: MutationContext, seeds: PathBatch, starts: NDArray, n_steps:
         enabled: switches for (lens, caustic, multichain, bidirectional).
         keep_going: ``keep_going(fraction) -> bool``; False stops after the current step
             (the deposits so far stay valid: every chain stopped at the same step).
+        interrupt: optional ``interrupt(fraction) -> bool`` polled between the mutation
+            groups of a step (a step of 10^5+ chains takes seconds); False abandons the
+            step at once, without its deposits (a user cancel: the result is not used).
     """
     scene = ctx.scene
     window = scene.camera.window
@@ -147,10 +150,14 @@ def run_chains(ctx: MutationContext, seeds: PathBatch, starts: NDArray, n_steps:
     steps_done = 0
     for step in range(n_steps if C else 0):
         choice = _pick_mutation(applicable(ctx, x, enabled), rng.random(C))
+        abandoned = False
         for mut in range(4):
             rows = np.flatnonzero(choice == mut)
             if len(rows) == 0:
                 continue
+            if interrupt is not None and interrupt((step + mut / 4) / n_steps) is False:
+                abandoned = True
+                break
             prop = MUTATORS[mut](ctx, x.take(rows), rng)
             f_y, c_y = contribution(scene, prop.paths, with_x2_light=True)
             y_y = luminance(f_y)
@@ -171,6 +178,8 @@ def run_chains(ctx: MutationContext, seeds: PathBatch, starts: NDArray, n_steps:
                 new = prop.x2_changed[acc]
                 if new.any():
                     vpl[r[new]] = store.add(moved.take(np.flatnonzero(new)))
+        if abandoned:
+            break
         # Deposit e_d at every chain's current state (its VPL and, for the diagnostic, its pixel).
         store.count[: store.n] += np.bincount(vpl, minlength=store.n)
         for c in range(3):

@@ -172,3 +172,21 @@ def test_chain_starts_is_unbiased():
     energy = rng.exponential(size=2000)
     starts = np.mean([chain_starts(energy, 10, 0.05, rng) for _ in range(200)], axis=0)
     np.testing.assert_allclose(starts, energy / (10 * 0.05), atol=0.25)
+
+
+def test_interrupt_abandons_the_step_without_its_deposits(scene, pools):
+    """interrupt(fraction) is polled between a step's mutation groups; False stops at once,
+    leaving only the complete steps' deposits (keep_going stops between steps)."""
+    seeds, e, _, _ = pools
+    start = resample(seeds, e, 200, np.random.default_rng(3))
+    ctx = MutationContext(scene, DEPTH + 1)
+    polls = []
+
+    def interrupt(fraction):
+        polls.append(fraction)
+        return len(polls) <= 5
+
+    res = run_chains(ctx, start, np.ones(len(start), np.int64), 10, (True, True, True, True),
+                     np.random.default_rng(3), interrupt=interrupt)
+    assert len(polls) == 6 and polls == sorted(polls) and polls[-1] < 0.3
+    assert 0 < res.steps_done < 3 and res.count.sum() == 200 * res.steps_done

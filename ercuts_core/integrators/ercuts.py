@@ -147,7 +147,9 @@ class ErcutsIntegrator:
         deadline = self._deadline(clock, _SHARE["chains"])
         label = f"| {int(starts.sum())} chains x {s.chain_length} steps"
         chains = run_chains(ctx, seeds.take(starts > 0), starts[starts > 0], s.chain_length, enabled,
-                            rng, lambda f: self._alive(clock, deadline, "ER chains", 0.1 + 0.9 * f, label))
+                            rng, lambda f: self._alive(clock, deadline, "ER chains", 0.1 + 0.9 * f, label),
+                            interrupt=lambda f: clock.poll(self._fraction("ER chains", 0.1 + 0.9 * f),
+                                                           f"ER chains {100 * f:.0f}% {label}"))
         timings["chains"] = time.perf_counter() - t0
         # With a shortened run every chain made the same number of steps: e_d stays P/n.
         n_states = chains.n_chains * chains.steps_done

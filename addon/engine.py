@@ -32,7 +32,7 @@ last_render: dict = {}
 PREVIEW_LIMITS = dict(integrator="PATH", samples=8, max_depth=4, time_limit=2.0)
 
 #: Phase names that start the core's progress messages (``ercuts_core.render``).
-PHASES = ("BDPT", "ER chains", "VPLs", "Light tree", "Lightcuts", "PATH")
+PHASES = ("BDPT", "Direct light", "ER chains", "VPLs", "Light tree", "Lightcuts", "PATH")
 
 
 def preview_settings(settings):

@@ -25,6 +25,7 @@ PREVIEW = {
     "max_error": 0.05,
     "e1_samples": 64,
     "shading_samples": 1,
+    "direct_samples": 8,
 }
 
 #: Fallback for the Final preset when the core cannot be imported (its defaults).
@@ -38,6 +39,7 @@ _FINAL_FALLBACK = {
     "max_error": 0.02,
     "e1_samples": 256,
     "shading_samples": 1,
+    "direct_samples": 64,
 }
 
 

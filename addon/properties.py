@@ -31,6 +31,12 @@ SEEDING_ITEMS = (
     ("BDPT", "Bidirectional", "Seed the chains from bidirectional paths (the paper)", 0),
     ("PATH", "Path Tracing", "Seed the chains from unidirectional paths", 1),
 )
+DIRECT_LIGHT_ITEMS = (
+    ("NEE", "Light Sampling", "Direct light by anti-aliased next-event estimation from every light; "
+     "virtual point lights carry the indirect light only", 0),
+    ("VPL", "Virtual Point Lights", "Direct light from area lights and emissive meshes through "
+     "virtual point lights on the lights, as in the paper", 1),
+)
 
 
 def _core_defaults() -> dict:
@@ -187,6 +193,17 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         items=SEEDING_ITEMS,
         default=_default("seeding", "BDPT"),
     )
+    direct_light: EnumProperty(
+        name="Direct Light",
+        description="How light that reaches the camera after one bounce is rendered",
+        items=DIRECT_LIGHT_ITEMS,
+        default=_default("direct_light", "NEE"),
+    )
+    direct_samples: IntProperty(
+        name="Direct Samples",
+        description="Samples per pixel of the direct light (Direct Light: Light Sampling)",
+        default=_default("direct_samples", 64), min=1, soft_max=4096,
+    )
     shading_samples: IntProperty(
         name="Shading Samples",
         description="Shading points (camera rays) per pixel for the virtual point light gather",
@@ -266,7 +283,8 @@ PROPERTY_NAMES = ("integrator", "samples", "seed", "max_depth", "rr_depth", "tim
                   "film_transparent", "batch_rays", "threads", "max_error", "chains_per_pixel",
                   "chain_length", "lens_perturbation", "caustic_perturbation",
                   "multichain_perturbation", "bidirectional_mutation", "max_cut_size", "clamp",
-                  "gather", "seeding", "shading_samples", "e1_samples", "memory_budget_mb")
+                  "gather", "seeding", "direct_light", "direct_samples", "shading_samples",
+                  "e1_samples", "memory_budget_mb")
 
 #: Properties of ``scene.ercuts`` that the add-on adds on top of the mirror (not core settings).
 ADDON_ONLY_NAMES = ("max_error_percent", "use_animated_seed", "use_denoising", "write_sidecar")

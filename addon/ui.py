@@ -92,6 +92,8 @@ class ERCUTS_RENDER_PT_sampling(ErcutsPanel, bpy.types.Panel):
         layout.prop(settings, "integrator")
         col = layout.column(align=True)
         col.prop(settings, "samples")
+        if settings.integrator == "ERCUTS" and settings.direct_light == "NEE":
+            col.prop(settings, "direct_samples")
         col.prop(settings, "seed")
         col.prop(settings, "use_animated_seed")
 
@@ -153,6 +155,7 @@ class ERCUTS_RENDER_PT_ercuts_advanced(ErcutsPanel, bpy.types.Panel):
     def draw(self, context):
         layout, settings = _settings_layout(self.layout, context)
         layout.active = settings.integrator == "ERCUTS"
+        layout.prop(settings, "direct_light")
         layout.prop(settings, "seeding")
         layout.prop(settings, "gather")
         col = layout.column(align=True)

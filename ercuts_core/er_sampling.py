@@ -161,7 +161,7 @@ def run_chains(ctx: MutationContext, seeds: PathBatch, starts: NDArray, n_steps:
             prop = MUTATORS[mut](ctx, x.take(rows), rng)
             f_y, c_y = contribution(scene, prop.paths, with_x2_light=True)
             y_y = luminance(f_y)
-            ok = prop.valid & is_target(scene, prop.paths) & (y_x[rows] > 0)
+            ok = prop.valid & is_target(scene, prop.paths, ctx.direct) & (y_x[rows] > 0)
             with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
                 a = np.where(ok, np.minimum(1.0, y_y * prop.ratio / np.where(ok, y_x[rows], 1.0)), 0.0)
             bad = ~np.isfinite(a)

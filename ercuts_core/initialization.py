@@ -1,9 +1,11 @@
 """Paper step 1 — initialization: a rough BDPT image, its energy P, and seed paths.
 
 P is the image energy (Σ over the window's pixels of the luminance) of the paths the VPLs
-stand for: paths with a surface point x2 (algorithm.md §G.1). It is the rough BDPT image's
-energy minus the energy of the other classes — light seen directly and direct light from
-point, spot, sun and environment lights — which the ERCUTS integrator renders itself.
+stand for: paths with a surface point x2 (algorithm.md §G.1). With ``direct_light='NEE'``
+(the default) these are the indirect paths (x2 scatters), and P is the energy of the rough
+BDPT image's indirect pass (:func:`indirect_energy`); with 'VPL' (the paper) it is the rough
+image's energy minus that of the classes the ERCUTS integrator renders itself — light seen
+directly and direct light from point, spot, sun and environment lights.
 
 Seed paths come from fresh samples, one per pixel (paper §3.2: "at each pixel a fresh
 bidirectional path"): every connection strategy of a BDPT sample with a non-zero
@@ -30,12 +32,19 @@ def rough_image_energy(image: NDArray) -> float:
     return float(luminance(np.asarray(image, np.float64)[..., :3]).sum())
 
 
+def indirect_energy(light_parts: NDArray) -> float:
+    """Σ over pixels of Y of the indirect pass of (3, h·w, 3) light passes (paths with two or
+    more scattering vertices, :data:`~ercuts_core.film.LIGHT_PASSES`)."""
+    return float(luminance(np.asarray(light_parts, np.float64)[2]).sum())
+
+
 def seeds_from_path_tracer(scene: BuiltScene, max_depth: int, rng: np.random.Generator,
-                           pix: NDArray | None = None) -> tuple[PathBatch, NDArray]:
+                           pix: NDArray | None = None, direct: bool = True) -> tuple[PathBatch, NDArray]:
     """One path-traced sample per pixel; every NEE connection and BSDF-found emitter is a seed.
 
     Returns:
-        (S paths, (S,) energies e = Y(w·C) in pixel units); target-class paths only.
+        (S paths, (S,) energies e = Y(w·C) in pixel units); target-class paths only
+        (:func:`~ercuts_core.paths.is_target` with ``direct``).
     """
     cam, tracer = scene.camera, scene.tracer
     w = cam.window
@@ -74,7 +83,7 @@ def seeds_from_path_tracer(scene: BuiltScene, max_depth: int, rng: np.random.Gen
     if not out_paths:
         return PathBatch.empty(0, K), np.zeros(0)
     paths, e = PathBatch.concat(out_paths), np.concatenate(out_e)
-    keep = is_target(scene, paths) & (e > 0)
+    keep = is_target(scene, paths, direct) & (e > 0)
     return paths.take(keep), e[keep]
 
 

@@ -67,11 +67,12 @@ class Proposal:
 
 
 class MutationContext:
-    """Per-render constants of the mutations (camera window, jump sizes, depth limit)."""
+    """Per-render constants of the mutations (camera window, jump sizes, depth limit, target class)."""
 
-    def __init__(self, scene: BuiltScene, max_edges: int):
+    def __init__(self, scene: BuiltScene, max_edges: int, direct: bool = True):
         self.scene = scene
         self.max_edges = max_edges
+        self.direct = direct            # target class includes x2 on a light (is_target)
         cam = scene.camera
         w = cam.window
         self.r1 = 0.1

@@ -114,8 +114,12 @@ def light_kind(scene: BuiltScene, paths: PathBatch) -> NDArray:
     return scene.lights.kind[paths.light]
 
 
-def is_target(scene: BuiltScene, paths: PathBatch) -> NDArray:
-    """(C,) True where x2 exists and is a surface point (a VPL can sit there)."""
+def is_target(scene: BuiltScene, paths: PathBatch, direct: bool = True) -> NDArray:
+    """(C,) True where x2 exists and is a surface point (a VPL can sit there); with
+    ``direct=False`` only where x2 also scatters (k ≥ 3: indirect light, the chains' class
+    when direct light is rendered by next-event estimation, ``direct_light='NEE'``)."""
+    if not direct:
+        return paths.k >= 3
     kind = light_kind(scene, paths)
     surface_light = (kind == AREA) | (kind == TRI)
     return (paths.k >= 3) | ((paths.k == 2) & surface_light)

@@ -12,6 +12,7 @@ from dataclasses import dataclass, fields
 INTEGRATORS = ("ERCUTS", "BDPT", "PATH")
 GATHERS = ("LIGHTCUTS", "BRUTE_FORCE")
 SEEDINGS = ("BDPT", "PATH")
+DIRECT_LIGHTS = ("NEE", "VPL")
 
 
 @dataclass(frozen=True)
@@ -42,6 +43,13 @@ class RenderSettings:
         gather: 'LIGHTCUTS' (the light tree) or 'BRUTE_FORCE' (every VPL at every shading
             point: the ablation that shows the tree's role).
         seeding: 'BDPT' (paper: seed chains from bidirectional paths) or 'PATH'.
+        direct_light: how ERCUTS renders light that reaches the camera after one
+            scattering: 'NEE' (default) with ``samples`` anti-aliased passes of next-event
+            estimation + MIS from every light, the chains and VPLs carrying only indirect
+            light; 'VPL' (the paper: chain paths whose x2 lies on an area light or emissive
+            mesh become VPLs on the light, gathered with the rest).
+        direct_samples: samples per pixel of ERCUTS's direct light passes
+            (``direct_light='NEE'``).
         shading_samples: shading points (camera rays) per pixel for the VPL gather.
         e1_samples: shading points per VPL for its intensity normalisation (P*).
         memory_budget_mb: memory the render may allocate, in MiB (0 = no limit); batch
@@ -69,6 +77,8 @@ class RenderSettings:
     clamp: float = 0.02
     gather: str = "LIGHTCUTS"
     seeding: str = "BDPT"
+    direct_light: str = "NEE"
+    direct_samples: int = 64
     shading_samples: int = 1
     e1_samples: int = 256
     memory_budget_mb: int = 4096
@@ -88,12 +98,14 @@ class RenderSettings:
             raise ValueError(f"unknown gather {self.gather!r}; expected one of {GATHERS}")
         if self.seeding not in SEEDINGS:
             raise ValueError(f"unknown seeding {self.seeding!r}; expected one of {SEEDINGS}")
+        if self.direct_light not in DIRECT_LIGHTS:
+            raise ValueError(f"unknown direct_light {self.direct_light!r}; expected one of {DIRECT_LIGHTS}")
         if not 0 < self.max_error < 1:
             raise ValueError(f"max_error must be in (0, 1), got {self.max_error}")
         if self.chains_per_pixel <= 0 or self.chain_length < 1:
             raise ValueError("chains_per_pixel must be > 0 and chain_length >= 1")
-        if self.max_cut_size < 1 or self.shading_samples < 1 or self.e1_samples < 1:
-            raise ValueError("max_cut_size, shading_samples and e1_samples must be >= 1")
+        if min(self.max_cut_size, self.shading_samples, self.e1_samples, self.direct_samples) < 1:
+            raise ValueError("max_cut_size, shading_samples, e1_samples and direct_samples must be >= 1")
         if self.clamp < 0:
             raise ValueError(f"clamp must be >= 0, got {self.clamp}")
         if self.memory_budget_mb < 0:

@@ -21,7 +21,7 @@ from ercuts_core.film import LIGHT_PASSES
 from ercuts_core.sampling import luminance
 from ercuts_core.scenes import closed_room, cornell_box
 
-ERCUTS_PHASES = ("BDPT", "ER chains", "VPLs", "Light tree", "Lightcuts")
+ERCUTS_PHASES = ("BDPT", "Direct light", "ER chains", "VPLs", "Light tree", "Lightcuts")
 FAST = dict(integrator="ERCUTS", samples=4, chain_length=20, e1_samples=32)
 
 

@@ -692,7 +692,7 @@ class BDPTIntegrator(Integrator):
             return PathBatch.empty(0, self.settings.max_depth + 2), np.zeros(0)
         paths = PathBatch.concat([b[0] for b in parts])
         e = np.concatenate([b[1] for b in parts])
-        keep = is_target(self.scene, paths) & (e > 0)
+        keep = is_target(self.scene, paths, self.settings.direct_light == "VPL") & (e > 0)
         return paths.take(keep), e[keep]
 
     def _seed_batch(self, cam: _Subpaths, lig: _Subpaths) -> tuple[PathBatch, NDArray]:
@@ -760,7 +760,8 @@ def seed_paths(scene: BuiltScene, settings: RenderSettings, rng: np.random.Gener
     e = Y(w·C) in image units: camera-sample rows count toward their pixel, light-tracing
     (t = 1) rows are divided by the number of window pixels like their splats, so Σe is an
     unbiased estimate of the image energy Σ_pixels Y. Only target-class paths (x2 on a
-    surface, :func:`~ercuts_core.paths.is_target`) with e > 0 are returned.
+    surface, :func:`~ercuts_core.paths.is_target`; x2 scattering unless
+    ``settings.direct_light`` is 'VPL') with e > 0 are returned.
 
     Returns:
         (S paths with ``settings.max_depth + 2`` slots, (S,) energies).

@@ -150,6 +150,9 @@ def test_ercuts_diagnostic_passes(tmp_path):
     s = _scene(samples=2, integrator="ERCUTS")
     bpy.ops.ercuts.sampling_preset(preset="PREVIEW")
     s.ercuts.samples = 2
+    # VPLs on the lamp, which the camera sees (with direct light by light sampling the VPLs
+    # are indirect only, at x2 on the wall, out of view: a density of 0 everywhere).
+    s.ercuts.direct_light = "VPL"
     vl = s.view_layers[0]
     for toggle in ("use_pass_cut_size", "use_pass_vpl_density", "use_pass_er_caustic"):
         setattr(vl.ercuts, toggle, True)

@@ -277,18 +277,22 @@ def test_orthographic_camera_has_no_light_tracing_strategy():
     assert film.color.sum() > 0 and film.nonfinite == 0
 
 
-def test_seed_paths_are_valid_paths_whose_energy_matches_path_tracer_seeds():
+@pytest.mark.parametrize("direct_light", ["NEE", "VPL"])
+def test_seed_paths_are_valid_paths_whose_energy_matches_path_tracer_seeds(direct_light):
     """ERCUTS seeding: BDPT seeds are unoccluded target-class paths with f > 0 whose raster
-    position is x1's projection, and Σe estimates the same energy as path-traced seeds."""
+    position is x1's projection, and Σe estimates the same energy as path-traced seeds
+    (indirect paths only with direct light by NEE; also x2 on the light with 'VPL')."""
     from ercuts_core.initialization import seeds_from_path_tracer
     from ercuts_core.integrators.bdpt import seed_paths
     from ercuts_core.paths import contribution, edge_visible, is_target
 
     scene = BuiltScene(sanitize(cornell_box(16, 12, "mesh")).desc)
-    settings = RenderSettings(max_depth=5)
+    settings = RenderSettings(max_depth=5, direct_light=direct_light)
+    direct = direct_light == "VPL"
     paths, e = seed_paths(scene, settings, np.random.default_rng(0))
     assert len(paths) > 0 and paths.slots == settings.max_depth + 2
-    assert (e > 0).all() and is_target(scene, paths).all()
+    assert (e > 0).all() and is_target(scene, paths, direct).all()
+    assert (paths.k == 2).any() == direct
     assert (contribution(scene, paths).max(axis=1) > 0).all()
     for i in range(int(paths.k.max())):
         m = paths.k > i
@@ -297,8 +301,8 @@ def test_seed_paths_are_valid_paths_whose_energy_matches_path_tracer_seeds():
     assert inside.all() and np.abs(raster - paths.raster).max() < 1e-4
     # Σe over one sample per pixel: same expectation as the path tracer's seeds
     eb = np.array([seed_paths(scene, settings, np.random.default_rng(s))[1].sum() for s in range(30)])
-    ep = np.array([seeds_from_path_tracer(scene, settings.max_depth, np.random.default_rng(100 + s))[1].sum()
-                   for s in range(30)])
+    ep = np.array([seeds_from_path_tracer(scene, settings.max_depth, np.random.default_rng(100 + s),
+                                          direct=direct)[1].sum() for s in range(30)])
     se = np.sqrt(eb.var(ddof=1) / len(eb) + ep.var(ddof=1) / len(ep))
     assert abs(eb.mean() - ep.mean()) < 4 * se, (eb.mean(), ep.mean(), se)
     scene.close()

@@ -49,9 +49,10 @@ SCENES = {
     "directly_lit": ("direct", "blocks on an open floor under a large panel (easy, direct light)"),
 }
 TARGET_RATIO, TARGET_ENERGY, TARGET_DIRECT = 0.5, 0.05, 2.0
-#: BDPT and PATH render samples until the budget runs out; so does ERCUTS's rough BDPT pass
-#: (step 1, its 15 % time share; a better P), the other ERCUTS settings are the defaults.
-ERCUTS_SETTINGS = {"ERCUTS": dict(integrator="ERCUTS", samples=1_000_000),
+#: BDPT and PATH render samples until the budget runs out; so do ERCUTS's rough BDPT pass
+#: (step 1: a better P) and its direct-light passes, each in its time share; the other
+#: ERCUTS settings are the defaults.
+ERCUTS_SETTINGS = {"ERCUTS": dict(integrator="ERCUTS", samples=1_000_000, direct_samples=1_000_000),
                    "BDPT": dict(integrator="BDPT", samples=1_000_000),
                    "PATH": dict(integrator="PATH", samples=1_000_000)}
 
@@ -606,8 +607,9 @@ def write_report(args) -> str:
              f"Resolution {w}×{h}; budgets {', '.join(f'{b:g} s' for b in budgets)} of wall time per render; "
              f"{len(seeds)} seed(s) per cell; all renders one after another in one process; "
              f"{_load_note(runs)}.", "",
-             "Engines: **ERCUTS** (default settings, except that its rough BDPT pass — step 1 — renders "
-             "samples for its whole 15 % share of the budget instead of stopping at 16), **BDPT** and "
+             "Engines: **ERCUTS** (default settings, except that its rough BDPT pass — step 1 — and its "
+             "direct-light passes render samples for their whole share of the budget instead of stopping "
+             "at 16 and 64), **BDPT** and "
              "**PATH** (Ercuts core, `RenderSettings.time_limit` = budget, covering every phase), **CYCLES** (bpy module, CPU, all "
              "cores, unbiased settings: no clamping, light threshold 0, adaptive sampling off, no denoising, "
              "1-px box filter, max bounces = Ercuts max_depth − 1 = 7; samples = measured rate × budget, "

@@ -25,8 +25,9 @@ the shading points — and the VPL gather. Either way the ERPT fallback of VPLs 
 sampled pixel is added.
 
 Time: with ``time_limit`` > 0 each phase gets its share (:data:`_SHARE`: rough BDPT 15 %,
-direct light 10 %, chains 30 %, VPL normalisation 15 % — fewer E1 samples per VPL if
-needed — and the rest for the gather) of the time left, paced by :class:`GatherPace`: the
+direct light 5 % plus up to 45 % more as the rough image's light is direct, chains 30 %,
+VPL normalisation 15 % — fewer E1 samples per VPL if needed — and the rest for the gather)
+of the time left, paced by :class:`GatherPace`: the
 shading points are gathered in a shuffled order of short runs, so every batch is a sample
 of the whole image, and after each batch the lightcut error threshold is raised (or
 lowered back toward ``max_error``) so the rest fits the time left; only above
@@ -93,8 +94,12 @@ from ..render import progress_batch_pixels
 from .base import dot
 
 #: Shares of the time limit per phase (the gather gets the rest); a phase's deadline gives
-#: it its share of the time *left*, so time an earlier phase did not need flows on.
-_SHARE = {"bdpt": 0.15, "direct": 0.10, "chains": 0.30, "vpl": 0.15}
+#: it its share of the time *left*, so time an earlier phase did not need flows on. The
+#: direct-light share grows by :data:`_DIRECT_SHARE_GROWTH` × the rough image's direct
+#: fraction (the other shares shrink in proportion): a directly lit scene spends its time
+#: on the direct passes, a corridor lit around corners on the chains and the gather.
+_SHARE = {"bdpt": 0.15, "direct": 0.05, "chains": 0.30, "vpl": 0.15}
+_DIRECT_SHARE_GROWTH = 0.45
 #: Conservative throughput of the E1 estimate (light-traced samples per second, 2 cores).
 _E1_RATE = 1.0e6
 #: Absolute lightcut error floor as a fraction of max_error × the mean pixel luminance.
@@ -124,6 +129,7 @@ class ErcutsIntegrator:
         self.scene = scene
         self.settings = settings
         self.memory = plan(scene.camera.window.n_pixels, scene.desc.mesh.n_triangles, settings)
+        self.share = dict(_SHARE)       # time shares of this render (:data:`_SHARE`)
 
     # ------------------------------------------------------------------ driver
     def render(self, film: Film, clock, timings: dict, stats: dict) -> None:
@@ -142,6 +148,9 @@ class ErcutsIntegrator:
         clock.show(rough.image)
         direct = None
         if nee:     # light seen directly and scattered once: its own anti-aliased passes
+            total = rough_image_energy(rough.image())
+            f_direct = 1.0 - indirect_energy(rough.light_parts()) / total if total > 0 else 0.0
+            self.share["direct"] = _SHARE["direct"] + _DIRECT_SHARE_GROWTH * min(max(f_direct, 0.0), 1.0)
             t0 = time.perf_counter()
             direct = self._direct_passes(clock, self._deadline(clock, "direct"))
             timings["direct"] = time.perf_counter() - t0
@@ -248,11 +257,12 @@ class ErcutsIntegrator:
         """End of ``phase``'s share (:data:`_SHARE`) of the time left, or None without a limit."""
         if clock.deadline is None:
             return None
-        order = [p for p in _SHARE if p != "direct" or self.settings.direct_light == "NEE"]
-        later = sum(_SHARE[p] for p in order[order.index(phase):])
+        share = self.share
+        order = [p for p in share if p != "direct" or self.settings.direct_light == "NEE"]
+        later = sum(share[p] for p in order[order.index(phase):])
         gather = 1.0 - sum(_SHARE[p] for p in order)
         now = time.perf_counter()
-        return now + max(clock.deadline - now, 0.0) * _SHARE[phase] / (later + gather)
+        return now + max(clock.deadline - now, 0.0) * share[phase] / (later + gather)
 
     def _alive(self, clock, deadline, phase: str, f: float, label: str) -> bool:
         ok = clock.report(self._fraction(phase, f), f"{phase} {100 * f:.0f}% {label}")

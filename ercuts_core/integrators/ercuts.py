@@ -146,10 +146,10 @@ class ErcutsIntegrator:
             film.merge(rough)
             return
         clock.show(rough.image)
-        direct = None
+        P_all = rough_image_energy(rough.image())
         if nee:     # light seen directly and scattered once: its own anti-aliased passes
-            total = rough_image_energy(rough.image())
-            f_direct = 1.0 - indirect_energy(rough.light_parts()) / total if total > 0 else 0.0
+            P = indirect_energy(rough.light_parts())
+            f_direct = 1.0 - P / P_all if P_all > 0 else 0.0
             self.share["direct"] = _SHARE["direct"] + _DIRECT_SHARE_GROWTH * min(max(f_direct, 0.0), 1.0)
             t0 = time.perf_counter()
             direct = self._direct_passes(clock, self._deadline(clock, "direct"))
@@ -158,14 +158,13 @@ class ErcutsIntegrator:
             if clock.cancelled:
                 film.merge(rough)
                 return
+            # Keep the light passes and the coverage; the film itself goes.
+            base, alpha = direct.light_parts(), direct.alpha / max(direct.passes_done, 1)
+            del direct
         t0 = time.perf_counter()
         g, _ = build_gbuffer(scene, s.shading_samples, rng)
-        P_all = rough_image_energy(rough.image())
-        if nee:
-            base = direct.light_parts()
-            P = indirect_energy(rough.light_parts())
-        else:
-            base = self._direct_image(g, rng)
+        if not nee:
+            base, alpha = self._direct_image(g, rng), self._alpha(g)
             P = max(P_all - float(luminance(base.sum(axis=0)).sum()), 0.0)
         stats["P"], stats["P_all"] = P, P_all
         # Seeds: fresh paths, one sample per pixel.
@@ -229,7 +228,6 @@ class ErcutsIntegrator:
             return
         # 5. Lightcuts (or the brute-force ablation).
         t0 = time.perf_counter()
-        alpha = direct.alpha / max(direct.passes_done, 1) if nee else self._alpha(g)
         rough_parts = rough.light_parts()
 
         def show(point_parts, complete):

@@ -309,12 +309,8 @@ def why_missed(scene, budget, g, refs, budgets, worst_ratio=None) -> list[str]:
                          f"the VPL geometry clamp, clamp={_setting(er, 'clamp', 0.02)}; diffuse VPLs at "
                          "glossy x2; cut caps, below)")
     energy = med(er, "energy")
-    if abs(energy - 1) > TARGET_ENERGY and (scene, "BDPT", budget) in g:
-        notes.append(f"energy {energy:.3f} against BDPT's {med(g[(scene, 'BDPT', budget)], 'energy'):.3f} "
-                     "at the same budget, so the difference comes from ERCUTS's VPL steps, not the scene or units"
-                     if abs(med(g[(scene, 'BDPT', budget)], 'energy') - 1) <= TARGET_ENERGY else
-                     f"BDPT's energy is also off ({med(g[(scene, 'BDPT', budget)], 'energy'):.3f}) at this "
-                     "budget: too few samples to judge")
+    if abs(energy - 1) > TARGET_ENERGY:
+        notes.append(_energy_reason(er, ref, g.get((scene, "BDPT", budget))))
     errs = [r["stats"].get("max_error_for_time_limit") for r in er]
     errs = [e for e in errs if e]
     if errs:
@@ -361,6 +357,28 @@ def why_missed(scene, budget, g, refs, budgets, worst_ratio=None) -> list[str]:
             top = sorted(share.items(), key=lambda kv: -kv[1])[:3]
             notes.append("time went to " + ", ".join(f"{k} {100 * s / total:.0f} %" for k, s in top))
     return notes
+
+
+def _energy_reason(er: list[dict], ref: dict, bdpt: list[dict] | None) -> str:
+    """Why ERCUTS's energy is off: its image energy is the rough BDPT pass's estimate (the
+    VPL image is scaled to P), so compare the two per seed before blaming the VPL steps."""
+    from ercuts_core.sampling import luminance
+
+    ref_y = float(luminance(ref["image"]).sum())
+    rough = [r["stats"].get("P_all", 0.0) / ref_y for r in er]
+    image = [float(luminance(r["image"]).sum()) / ref_y for r in er]
+    energies = ", ".join(f"{r['energy']:.3f}" for r in er)
+    if all(abs(e - q) < 0.01 for e, q in zip(image, rough)):
+        spp = ", ".join(str(r["stats"].get("bdpt_samples", "?")) for r in er)
+        return (f"ERCUTS's energy per seed ({energies}) is its rough BDPT pass's estimate of the image "
+                f"energy ({', '.join(f'{q:.3f}' for q in rough)} of the reference, {spp} spp; the VPL image "
+                "is scaled to P): the miss is that estimate's sampling noise, not the VPL steps, and "
+                "shrinks as 1/√(rough spp)")
+    if bdpt and abs(med(bdpt, "energy") - 1) <= TARGET_ENERGY:
+        return (f"energy {med(er, 'energy'):.3f} against BDPT's {med(bdpt, 'energy'):.3f} at the same budget, "
+                "while its rough pass estimated " + ", ".join(f"{q:.3f}" for q in rough) +
+                ": the difference comes from ERCUTS's VPL steps, not the scene or units")
+    return "BDPT's energy is also off at this budget: too few samples to judge"
 
 
 def _setting(rs, key, default):

@@ -157,3 +157,31 @@ def test_gather_pace_raises_the_error_then_caps_and_recovers():
     pace.record(stats, 256 * 16)
     assert stats["max_error_for_time_limit"] == MAX_PACED_ERROR and stats["cut_cap_for_time_limit"] == cap
     assert 0 < stats["paced_points_for_time_limit"] < 1
+
+
+def test_phase_deadlines_follow_the_shares():
+    """Each phase's deadline is its share of the time left over the shares still to come
+    (the gather's included); the direct-light share exists only with direct_light='NEE' and
+    grows with the rough image's direct fraction, shrinking the others."""
+    from types import SimpleNamespace
+
+    from ercuts_core.integrators.ercuts import ErcutsIntegrator
+    from ercuts_core.scene import BuiltScene
+    from ercuts_core.validate import sanitize
+
+    scene = BuiltScene(sanitize(closed_room(8, 6)).desc)
+    try:
+        now = time.perf_counter()
+        clock = SimpleNamespace(deadline=now + 100.0)
+        nee = ErcutsIntegrator(scene, RenderSettings(time_limit=100.0))
+        vpl = ErcutsIntegrator(scene, RenderSettings(time_limit=100.0, direct_light="VPL"))
+        assert vpl._deadline(clock, "bdpt") - now == pytest.approx(15.0, abs=0.05)     # 0.15 / 1
+        assert vpl._deadline(clock, "chains") - now == pytest.approx(100 * 0.30 / 0.85, abs=0.05)
+        assert nee._deadline(clock, "bdpt") - now == pytest.approx(15.0, abs=0.05)
+        assert nee._deadline(clock, "direct") - now == pytest.approx(100 * 0.05 / 0.85, abs=0.05)
+        nee.share["direct"] = 0.5                        # a directly lit scene; the gather keeps 0.35
+        assert nee._deadline(clock, "direct") - now == pytest.approx(100 * 0.5 / 1.30, abs=0.05)
+        assert nee._deadline(clock, "chains") - now == pytest.approx(100 * 0.30 / 0.80, abs=0.05)
+        assert ErcutsIntegrator(scene, RenderSettings())._deadline(SimpleNamespace(deadline=None), "bdpt") is None
+    finally:
+        scene.close()

@@ -24,13 +24,14 @@ import time
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 OUT = ROOT / "benchmarks" / "results"
 SIZES = [(160, 120), (640, 480), (1920, 1080)]
-#: Fast settings: one rough BDPT pass, short chains, few E1 samples; the time limit caps the gather.
-FAST = dict(samples=1, max_depth=2, chain_length=10, e1_samples=16, max_cut_size=100)
+#: Fast settings: one rough BDPT pass and one direct-light pass, short chains, few E1 samples;
+#: the time limit caps the gather.
+FAST = dict(samples=1, direct_samples=1, max_depth=2, chain_length=10, e1_samples=16, max_cut_size=100)
 #: Time limits by width (0 = none): long enough for the first BDPT pass and the seed paths
 #: (which a limit cannot shorten); the later phases share the rest and the gather fits its
 #: cut size. 1080p runs without a limit: its first pass and seeds take over 10 minutes.
 TIME_LIMIT = {160: 60.0, 640: 120.0, 1920: 0.0}
-PHASES = ("bdpt", "seeds", "chains", "vpls", "tree", "cuts")
+PHASES = ("bdpt", "direct", "seeds", "chains", "vpls", "tree", "cuts")
 
 CHILD = r"""
 import json, sys, time

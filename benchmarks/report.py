@@ -328,9 +328,16 @@ def why_missed(scene, budget, g, refs, budgets, worst_ratio=None) -> list[str]:
     incomplete = sum(bool(r["stats"].get("gather_incomplete")) for r in er)
     if incomplete:
         notes.append(f"the gather did not finish in {incomplete} of {len(er)} runs (part of the image missing)")
-    clamped = med_stat(er, "clamped_energy")
-    if clamped and clamped > 0.01:
-        notes.append(f"the VPL clamp removed {100 * clamped:.1f} % of the energy (stats clamped_energy)")
+    clamped = float(np.median([_clamped_share(r["stats"]) for r in er]))
+    if clamped > 0.01:
+        notes.append(f"the VPL clamp removed {100 * clamped:.1f} % of the gathered VPL light before the "
+                     "image was scaled back to P (stats clamped_energy: the clamp's energy moves elsewhere)")
+    edge, pixels = _edge_share(er, ref)
+    if edge > 0.2:
+        notes.append(f"{100 * edge:.0f} % of the relMSE of ERCUTS's seed mean sits on the {100 * pixels:.0f} % "
+                     "of pixels at edges (relative luminance step > 0.5 to a neighbour in the reference), "
+                     "where the gather's one shading point per pixel, at its centre, is not anti-aliased "
+                     "(the direct light is): more shading points on edge pixels would close this part")
     fl = ref["floor"]["relmse"]
     raw = med(er, "relmse")
     if raw > 0 and fl / raw > 0.2:
@@ -379,6 +386,33 @@ def _energy_reason(er: list[dict], ref: dict, bdpt: list[dict] | None) -> str:
                 "while its rough pass estimated " + ", ".join(f"{q:.3f}" for q in rough) +
                 ": the difference comes from ERCUTS's VPL steps, not the scene or units")
     return "BDPT's energy is also off at this budget: too few samples to judge"
+
+
+def _edge_share(er: list[dict], ref: dict) -> tuple[float, float]:
+    """(share of the seed mean's relMSE on edge pixels, share of pixels that are edges):
+    edges = relative luminance step > 0.5 to a 4-neighbour in the reference."""
+    from ercuts_core.sampling import luminance
+
+    r = ref["image"]
+    y = luminance(r)
+    step = np.zeros_like(y)
+    step[1:] = np.maximum(step[1:], np.abs(np.diff(y, axis=0)))
+    step[:-1] = np.maximum(step[:-1], np.abs(np.diff(y, axis=0)))
+    step[:, 1:] = np.maximum(step[:, 1:], np.abs(np.diff(y, axis=1)))
+    step[:, :-1] = np.maximum(step[:, :-1], np.abs(np.diff(y, axis=1)))
+    edges = step / (y + 0.1) > 0.5
+    mean = np.mean([x["image"] for x in er], axis=0)
+    err = np.mean((mean - r) ** 2 / (r**2 + metrics.EPS), axis=2)
+    total = float(err.sum())
+    return (float(err[edges].sum()) / total if total > 0 else 0.0), float(edges.mean())
+
+
+def _clamped_share(st: dict) -> float:
+    """Share of the gathered VPL light the G clamp removed: clamped / (clamped + gathered),
+    the gathered energy being P × vpl_energy_ratio (both luminance sums over the window)."""
+    clamped = st.get("clamped_energy", 0.0) or 0.0
+    gathered = (st.get("P", 0.0) or 0.0) * (st.get("vpl_energy_ratio", 0.0) or 0.0)
+    return clamped / (clamped + gathered) if clamped + gathered > 0 else 0.0
 
 
 def _setting(rs, key, default):

@@ -81,7 +81,7 @@ def report(cases: list[dict]) -> str:
         st = c["stats"]
         rows.append(f"| {c['width']}×{c['height']} | {c['peak_rss_mb']:.0f} | {c['baseline_mb']:.0f} | "
                     f"{c['peak_rss_mb'] - c['baseline_mb']:.0f} | {c['estimate_mb']:.0f} | {c['wall_s']:.0f} | "
-                    f"{st['vpls']} | {st['chains']} × {st['chain_steps']} | {len(ran)}/6 |")
+                    f"{st['vpls']} | {st['chains']} × {st['chain_steps']} | {len(ran)}/{len(PHASES)} |")
     errors = [c for c in cases if "error" in c]
     text = ["# Peak memory of ERCUTS renders (`benchmarks/bench_memory.py`)", "",
             f"S-corridor, default settings and memory budget (4096 MiB) except {FAST} and time "

@@ -190,13 +190,14 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
             export_stats=dict(exported.stats), stats=dict(result.stats), passes=list(images),
             missing_passes=[p.name for p in missing], progressive=progressive,
             layer=layer_name)
-        if scene.ercuts.write_sidecar and self._user_cancelled:
-            # Blender writes no image for a cancelled frame; its statistics file (maybe of
-            # an earlier good render) stays as it is too.
-            print("Ercuts: render cancelled: statistics file not written")
-        elif scene.ercuts.write_sidecar:
-            last_render["sidecar"] = self._write_sidecar(scene, layer_name, result, settings,
-                                                         exported, warnings, elapsed)
+        if scene.ercuts.write_sidecar:
+            if self._user_cancelled:
+                # Blender writes no image for a cancelled frame; its statistics file (maybe
+                # of an earlier good render) stays as it is too.
+                print("Ercuts: render cancelled: statistics file not written")
+            else:
+                last_render["sidecar"] = self._write_sidecar(scene, layer_name, result, settings,
+                                                             exported, warnings, elapsed)
         if warnings:
             unique = list(dict.fromkeys(warnings))
             for w in unique:

@@ -162,7 +162,7 @@ def phase_parts(n_pixels: int, settings: RenderSettings, batch: int, seeds: int,
         parts["chain states"] = int(_chains(n_pixels, s) * CHAIN_PATHS * path_bytes(s.max_depth))
         parts["E1 chunk"] = e1 * E1_SAMPLE_BYTES
         parts["lightcuts"] = gather * s.max_cut_size * CUT_ENTRY_BYTES
-        if s.direct_light == "NEE":     # the direct-light film and its pass, freed after
+        if not s.direct_vpls:     # the direct-light film and its pass, freed after
             parts["direct light"] = n_pixels * FILM_CHANNELS * 8 * 2
     return parts
 

@@ -123,5 +123,11 @@ class RenderSettings:
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
+    @property
+    def direct_vpls(self) -> bool:
+        """ERCUTS chains and VPLs also carry direct light (``direct_light='VPL'``, the paper);
+        the target class of :func:`~ercuts_core.paths.is_target`."""
+        return self.direct_light == "VPL"
+
     def replace(self, **changes) -> "RenderSettings":
         return dataclasses.replace(self, **changes)

@@ -692,7 +692,7 @@ class BDPTIntegrator(Integrator):
             return PathBatch.empty(0, self.settings.max_depth + 2), np.zeros(0)
         paths = PathBatch.concat([b[0] for b in parts])
         e = np.concatenate([b[1] for b in parts])
-        keep = is_target(self.scene, paths, self.settings.direct_light == "VPL") & (e > 0)
+        keep = is_target(self.scene, paths, self.settings.direct_vpls) & (e > 0)
         return paths.take(keep), e[keep]
 
     def _seed_batch(self, cam: _Subpaths, lig: _Subpaths) -> tuple[PathBatch, NDArray]:

@@ -136,7 +136,7 @@ class ErcutsIntegrator:
         s, scene = self.settings, self.scene
         window = scene.camera.window
         rng = np.random.default_rng([s.seed, 0xE5C7])
-        nee = s.direct_light == "NEE"
+        nee = not s.direct_vpls
         # 1. Rough BDPT image and P.
         t0 = time.perf_counter()
         rough, spp = self._rough_bdpt(clock, self._deadline(clock, "bdpt"))
@@ -177,7 +177,7 @@ class ErcutsIntegrator:
             return
         # 2. ER chains.
         t0 = time.perf_counter()
-        ctx = MutationContext(scene, s.max_depth + 1, direct=not nee)
+        ctx = MutationContext(scene, s.max_depth + 1, direct=s.direct_vpls)
         enabled = (s.lens_perturbation, s.caustic_perturbation, s.multichain_perturbation,
                    s.bidirectional_mutation)
         deadline = self._deadline(clock, "chains")
@@ -256,7 +256,7 @@ class ErcutsIntegrator:
         if clock.deadline is None:
             return None
         share = self.share
-        order = [p for p in share if p != "direct" or self.settings.direct_light == "NEE"]
+        order = [p for p in share if p != "direct" or not self.settings.direct_vpls]
         later = sum(share[p] for p in order[order.index(phase):])
         gather = 1.0 - sum(_SHARE[p] for p in order)
         now = time.perf_counter()
@@ -317,7 +317,7 @@ class ErcutsIntegrator:
         if s.seeding == "BDPT":
             from .bdpt import seed_paths
             return seed_paths(scene, s, rng, pix)
-        return seeds_from_path_tracer(scene, s.max_depth, rng, pix, direct=s.direct_light == "VPL")
+        return seeds_from_path_tracer(scene, s.max_depth, rng, pix, direct=s.direct_vpls)
 
     def _chain_seeds(self, e_d: float, rng, clock):
         """Seed paths and their chain counts, in batches of ``memory.seed_pixels`` pixels (at

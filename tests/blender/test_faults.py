@@ -5,9 +5,16 @@ file writers are tested in tests/test_image_io.py).
 Cancelling stands in for Esc by returning False from the engine's progress callback when
 the core's message names the phase (api.md: messages start with the phase name). A
 cancelled render must return, leave Blender able to render again at once, and give its
-memory back: the resident set after many cancelled renders may not grow by more than
-``RSS_GROWTH_MB`` over 20 renders (a leak of 1 MiB per render — less than one render's
-films, G-buffer and VPLs at 64×48 — was checked to fail it with 20 MiB).
+memory back.
+
+Memory is judged by the trend of the resident set, not by the difference of two readings:
+inside Blender the RSS after a render scatters by σ ≈ 6 MiB around its level (measured over
+80 cancelled renders in Blender 3.4.1: mean slope +0.04 MiB/render, readings 317–346 MiB),
+so one reading minus another failed a 12 MiB limit by chance on CI. The least-squares
+slope over ``N_CANCELLED`` = 35 renders has a standard error of σ/√(Σ(i−ī)²) ≈ 6/59 ≈
+0.10 MiB/render; ``MAX_SLOPE_MB`` = 0.6 MiB/render is 6 standard errors above no leak, and
+a leak of 1 MiB per render (less than one render's films, G-buffer and VPLs at 64×48),
+injected by hand, measured a slope of 1.53 ± 0.10 and fails it.
 """
 from __future__ import annotations
 
@@ -22,9 +29,9 @@ import blender_helpers as bh
 from addon import engine
 
 PHASES = ("BDPT", "ER chains", "VPLs", "Light tree", "Lightcuts")
-#: Allowed RSS growth over 20 cancelled renders after a warm-up [MiB].
-RSS_GROWTH_MB = 12.0
-N_CANCELLED = 20
+#: Allowed least-squares slope of the RSS over cancelled renders after a warm-up [MiB/render].
+MAX_SLOPE_MB = 0.6
+N_CANCELLED = 35
 
 
 def rss_mb() -> float:
@@ -86,13 +93,16 @@ def test_cancelled_renders_free_their_memory(tmp_path, monkeypatch):
     for p in PHASES:                        # warm-up: caches, allocator arenas, imports
         phase["now"] = p
         bh.render_exr(tmp_path / "warm.exr")
-    before = rss_mb()
+    readings = []
     for i in range(N_CANCELLED):
         phase["now"] = PHASES[i % len(PHASES)]
         bh.render_exr(tmp_path / "cancel.exr")
         assert engine.last_render["cancelled"]
-    growth = rss_mb() - before
-    assert growth < RSS_GROWTH_MB, f"RSS grew by {growth:.1f} MiB over {N_CANCELLED} cancelled renders"
+        readings.append(rss_mb())
+    slope = np.polyfit(np.arange(N_CANCELLED), readings, 1)[0]
+    assert slope < MAX_SLOPE_MB, (
+        f"RSS grows by {slope:.2f} MiB per cancelled render over {N_CANCELLED} renders: "
+        + " ".join(f"{r:.0f}" for r in readings))
 
 
 def test_core_exception_is_one_error_line_with_the_traceback_in_the_console(tmp_path, monkeypatch, capfd):

@@ -17,10 +17,11 @@ Cornell box and the S-corridor (160×120), this benchmark
 4. renders again under cProfile and saves the top 20 functions by cumulative and by
    internal time to ``benchmarks/results/profiles/<scene>_<integrator>.txt``.
 
-ERCUTS phases are the keys of ``result.timings``: ``bdpt`` (rough BDPT image), ``seeds``
-(G-buffer, direct light, seed paths), ``chains`` (ER chains), ``vpls`` (VPLs and their
-light-traced E1), ``tree`` and ``cuts`` (the lightcuts gather). Rays are attributed to a
-phase by the ErcutsIntegrator method on the call stack.
+ERCUTS phases are the keys of ``result.timings``: ``bdpt`` (rough BDPT image), ``direct``
+(the direct-light passes: path tracing to depth 1 with NEE), ``seeds`` (G-buffer, seed
+paths), ``chains`` (ER chains), ``vpls`` (VPLs and their light-traced E1), ``tree`` and
+``cuts`` (the lightcuts gather). Rays are attributed to a phase by the ErcutsIntegrator
+method on the call stack.
 
 Writes ``benchmarks/results/tracer_efficiency.{md,json}``. The JSON keeps the first run
 made with ``--label before`` as the baseline; every other run is stored as ``after`` and
@@ -55,10 +56,10 @@ OUT = os.path.join(ROOT, "benchmarks", "results")
 PROFILES = os.path.join(OUT, "profiles")
 #: ErcutsIntegrator methods (and the functions they call) → phase key of result.timings.
 PHASE_OF_FUNCTION = {
-    "_rough_bdpt": "bdpt", "build_gbuffer": "seeds", "_direct_image": "seeds", "_seeds": "seeds",
+    "_rough_bdpt": "bdpt", "_direct_passes": "direct", "build_gbuffer": "seeds", "_direct_image": "seeds", "_seeds": "seeds",
     "run_chains": "chains", "make_vpls": "vpls", "_gather": "cuts",
 }
-ERCUTS_PHASES = ("bdpt", "seeds", "chains", "vpls", "tree", "cuts")
+ERCUTS_PHASES = ("bdpt", "direct", "seeds", "chains", "vpls", "tree", "cuts")
 #: Hot spots removed (one commit each; before/after measured interleaved as CPU seconds,
 #: best of 3, on the shared 2-core machine; results bit-identical unless stated).
 CHANGES = [

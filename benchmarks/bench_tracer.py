@@ -87,8 +87,10 @@ CHANGES = [
 
 #: What the profiles say is left (not asserted; re-read the profiles after a re-run).
 REMAINING = [
-    "embreex is still only 3–25 % of each phase: the rest is many small vectorised numpy passes "
-    "(gathers, einsum dots, (N,3) temporaries); no single function above ~12 % of a profile.",
+    "embreex is still only 2–15 % of each phase (tracer calls 4–25 %; 2026-12-02 run, with the "
+    "direct-light phase): the rest is many small vectorised numpy passes (ndarray.take 12 %, "
+    "einsum dots 8 % of the S-corridor ERCUTS profile, (N,3) temporaries); no Python function "
+    "above 5 % by internal time.",
     "ERCUTS gather (the slowest phase): the Lightcuts bounds (cluster_bound/cosine_bound) and the "
     "per-round `_select` sort and luminance of every active entry; the shading callbacks in "
     "integrators/ercuts.py still use fancy indexing (`wo[k]`, `p[k]`) — take_rows would help there.",

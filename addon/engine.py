@@ -15,6 +15,7 @@ phase. The final image goes into Combined and the view layer's enabled passes
 (:mod:`.passes`, declared in ``update_render_passes``); optionally a JSON statistics
 file is written next to the frame (:mod:`.sidecar`). Preview thumbnails
 (``is_preview``) use :func:`preview_settings`, without passes, border or statistics.
+The Rendered viewport (``view_update``/``view_draw``) lives in :mod:`.viewport`.
 """
 from __future__ import annotations
 
@@ -111,6 +112,28 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
             return (f"cannot load the Ercuts core ({exc}); numpy, embreex and ercuts_core "
                     "must be importable by Blender's Python")
         return f"{type(exc).__name__}: {exc} (see the console for details)"
+
+    # ------------------------------------------------------------------ viewport
+    def view_update(self, context, depsgraph):
+        """Rendered viewport: the scene changed (:mod:`.viewport`)."""
+        from . import viewport
+
+        viewport.view_update(self, context, depsgraph)
+
+    def view_draw(self, context, depsgraph):
+        """Rendered viewport: draw the newest image, restart on view changes (:mod:`.viewport`)."""
+        from . import viewport
+
+        try:
+            viewport.view_draw(self, context, depsgraph)
+        except Exception as exc:  # noqa: BLE001 - never a traceback in the UI
+            traceback.print_exc()
+            self.update_stats("Ercuts", f"Error: {self._error_message(exc)}")
+
+    def __del__(self):
+        session = getattr(self, "_viewport_session", None)
+        if session is not None:     # a viewport engine is freed: stop its render thread
+            session.stop()
 
     # ------------------------------------------------------------------ passes
     def update_render_passes(self, scene=None, renderlayer=None):

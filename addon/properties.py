@@ -241,6 +241,18 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
                      "denoising (see Set Up Denoising)"),
         default=False, update=_update_passes,
     )
+    viewport_integrator: EnumProperty(
+        name="Viewport Integrator",
+        description=("Integrator of the Rendered viewport shading mode; it refines progressively "
+                     "(the ERCuts pipeline is not progressive, so the viewport offers the "
+                     "unbiased integrators)"),
+        items=tuple(item for item in INTEGRATOR_ITEMS if item[0] != "ERCUTS"), default="PATH",
+    )
+    viewport_samples: IntProperty(
+        name="Viewport Samples",
+        description="Samples per pixel of the Rendered viewport; each one is shown as it completes",
+        default=64, min=1, soft_max=4096,
+    )
     write_sidecar: BoolProperty(
         name="Statistics File",
         description=("Write a JSON file with the settings, seed, per-phase timings and VPL/cut "
@@ -287,7 +299,8 @@ PROPERTY_NAMES = ("integrator", "samples", "seed", "max_depth", "rr_depth", "tim
                   "e1_samples", "memory_budget_mb")
 
 #: Properties of ``scene.ercuts`` that the add-on adds on top of the mirror (not core settings).
-ADDON_ONLY_NAMES = ("max_error_percent", "use_animated_seed", "use_denoising", "write_sidecar")
+ADDON_ONLY_NAMES = ("max_error_percent", "use_animated_seed", "use_denoising", "viewport_integrator",
+                    "viewport_samples", "write_sidecar")
 
 
 def _pass_toggle(pass_def) -> BoolProperty:

@@ -96,6 +96,9 @@ class ERCUTS_RENDER_PT_sampling(ErcutsPanel, bpy.types.Panel):
             col.prop(settings, "direct_samples")
         col.prop(settings, "seed")
         col.prop(settings, "use_animated_seed")
+        col = layout.column(align=True)
+        col.prop(settings, "viewport_integrator")
+        col.prop(settings, "viewport_samples")
 
 
 class ERCUTS_RENDER_PT_light_paths(ErcutsPanel, bpy.types.Panel):

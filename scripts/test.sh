@@ -11,11 +11,14 @@ bash "$root/scripts/setup_env.sh"
 cd "$root"
 status=0
 # blender first: step 1's tests/test_cli_batch.py runs the binary too.
-if [ "${ERCUTS_SKIP_BLENDER34:-0}" != 1 ] && ! command -v blender >/dev/null 2>&1 \
+# xvfb-run and Mesa's software OpenGL let tests/test_viewport_gui.py open a Blender window.
+if [ "${ERCUTS_SKIP_BLENDER34:-0}" != 1 ] && { ! command -v blender >/dev/null 2>&1 \
+    || ! command -v xvfb-run >/dev/null 2>&1; } \
     && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-  echo "test.sh: installing Debian's blender for the Blender 3.4 add-on tests"
-  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq blender >/dev/null) \
-    || echo "test.sh: could not install blender"
+  echo "test.sh: installing Debian's blender, xvfb and Mesa for the Blender 3.4 add-on tests"
+  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+      blender xvfb libgl1-mesa-dri >/dev/null) \
+    || echo "test.sh: could not install blender/xvfb"
 fi
 "$root/.venv/bin/python" -m pytest "$@" || status=$?
 if [ "${ERCUTS_SKIP_BLENDER34:-0}" != 1 ]; then

@@ -406,11 +406,8 @@ CAMERA_CASES = [
 ]
 
 
-@pytest.mark.parametrize("case", CAMERA_CASES, ids=[str(i) for i in range(len(CAMERA_CASES))])
-def test_core_camera_corners_match_view_frame(case):
-    """Rays of ercuts_core.camera at the 4 frame corners hit Blender's view_frame corners."""
-    from ercuts_core.camera import Camera
-
+def camera_case(case):
+    """The scene's resolution, pixel aspect and a camera as a CAMERA_CASES row describes."""
     s = bpy.context.scene
     s.render.resolution_x, s.render.resolution_y = case["res"]
     s.render.pixel_aspect_x, s.render.pixel_aspect_y = case.get("aspect", (1.0, 1.0))
@@ -421,6 +418,16 @@ def test_core_camera_corners_match_view_frame(case):
         ob.data.type = "ORTHO"
         ob.data.ortho_scale = case["ortho"]
     bpy.context.view_layer.update()
+    return ob
+
+
+@pytest.mark.parametrize("case", CAMERA_CASES, ids=[str(i) for i in range(len(CAMERA_CASES))])
+def test_core_camera_corners_match_view_frame(case):
+    """Rays of ercuts_core.camera at the 4 frame corners hit Blender's view_frame corners."""
+    from ercuts_core.camera import Camera
+
+    s = bpy.context.scene
+    ob = camera_case(case)
     desc = h.export().description.camera
     cam = Camera(desc)
     W, H = desc.width, desc.height

@@ -17,20 +17,7 @@ import pytest
 
 import blender_helpers as h
 from addon import viewport
-from test_export import CAMERA_CASES
-
-
-def _setup_camera(case):
-    s = bpy.context.scene
-    s.render.resolution_x, s.render.resolution_y = case["res"]
-    ob = h.camera(location=(1, -2, 3), target=(0, 0, 0), lens=42.0, sensor_width=36.0,
-                  sensor_height=24.0, sensor_fit=case["fit"])
-    ob.data.shift_x, ob.data.shift_y = case.get("shift", (0.0, 0.0))
-    if "ortho" in case:
-        ob.data.type = "ORTHO"
-        ob.data.ortho_scale = case["ortho"]
-    bpy.context.view_layer.update()
-    return ob
+from test_export import CAMERA_CASES, camera_case
 
 
 def _matrices(ob, width, height):
@@ -50,7 +37,7 @@ def test_region_camera_gives_the_rays_of_the_exported_camera(case):
     orthographic: same direction and the same line, the origin moved to the near plane)."""
     from ercuts_core.camera import Camera
 
-    ob = _setup_camera(case)
+    ob = camera_case(case)
     exported = h.export().description.camera
     W, H = exported.width, exported.height
     view, window = _matrices(ob, W, H)
@@ -88,7 +75,7 @@ def test_region_camera_of_a_free_orthographic_view_starts_behind_the_pivot():
 
 
 def test_camera_frame_and_border_in_region_fractions():
-    ob = _setup_camera(dict(res=(64, 32), fit="AUTO", shift=(0.1, 0.05)))
+    ob = camera_case(dict(res=(64, 32), fit="AUTO", shift=(0.1, 0.05)))
     view, window = _matrices(ob, 64, 32)
     world = np.array(ob.matrix_world)
     corners = np.array([list(v) for v in ob.data.view_frame(scene=bpy.context.scene)])

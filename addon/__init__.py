@@ -47,5 +47,8 @@ def register():
 
 
 def unregister():
+    from . import viewport
+
+    viewport.stop_all()
     for module in reversed(_modules):
         module.unregister()

@@ -25,6 +25,7 @@ in background mode) and uploads scene-linear RGBA; the display transform is Blen
 """
 from __future__ import annotations
 
+import atexit
 import dataclasses
 import threading
 import time
@@ -183,6 +184,19 @@ class Frame:
 
 #: Every live session (scripts and tests wait on them: ``all(not s.running for s in SESSIONS)``).
 SESSIONS: weakref.WeakSet = weakref.WeakSet()
+
+
+def stop_all(timeout: float = 2.0) -> None:
+    """Stop every viewport render and wait up to ``timeout`` seconds for each (add-on
+    unregister, Blender quitting: no render thread is left running into shutdown)."""
+    sessions = list(SESSIONS)
+    for session in sessions:
+        session.stop()
+    for session in sessions:
+        session.join(timeout)
+
+
+atexit.register(stop_all)
 
 
 class ViewportSession:

@@ -308,3 +308,15 @@ def test_a_large_viewport_shows_a_quick_coarse_image_first():
     assert calls == [(128, 96, 1), (256, 192, 4)]
     assert frames[0] == (128, 96) and frames[-1] == (256, 192)
     assert session.frame.size == (256, 192) and session.frame.samples == 4
+
+
+def test_stop_all_ends_every_viewport_render():
+    """Unregistering the add-on (and Blender quitting, through atexit) stops the renders."""
+    s, _ = _scene()
+    desc = h.export().description
+    sessions = [viewport.ViewportSession() for _ in range(2)]
+    for session in sessions:
+        session.start("long", desc, viewport.viewport_settings(s).replace(samples=100000))
+    viewport.stop_all(timeout=10)
+    assert all(not session._thread.is_alive() for session in sessions)
+    assert all(session.frame is None or session.frame.samples < 100000 for session in sessions)

@@ -142,8 +142,8 @@ def test_legacy_zip_registers_with_its_vendored_core(dist, tmp_path):
 
 
 #: Top-level modules the add-on may import absolutely (everything inside it is relative).
-EXTERNAL = {"bpy", "bpy_extras", "mathutils", "addon_utils", "gpu", "gpu_extras", "_cycles", "numpy", "ercuts_core", "embreex",
-            "scipy", "OpenEXR"}
+EXTERNAL = {"bpy", "bpy_extras", "mathutils", "addon_utils", "gpu", "gpu_extras", "_cycles", "numpy",
+            "ercuts_core", "embreex", "scipy", "OpenEXR"}
 
 
 def test_addon_imports_are_relative():

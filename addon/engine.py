@@ -267,8 +267,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
 
         from . import framebuffer
 
-        w = render_window(desc.camera)
-        window = (w.x0, w.y0, w.width, w.height)
+        window = render_window(desc.camera).rect
 
         def preview(image):
             framebuffer.show_preview(self, render, image, window, layer_name)

@@ -37,9 +37,8 @@ import numpy as np
 
 #: Largest value an RGBA16F texture holds.
 HALF_MAX = 65000.0
-#: Viewport integrators (the ERCUTS pipeline is not progressive: its chains, VPLs and light
-#: tree must all finish before the first gathered image).
-VIEWPORT_INTEGRATORS = ("PATH", "BDPT")
+#: ``viewport_border`` when the border lies wholly outside the region: nothing to render.
+EMPTY_BORDER = (0.0, 0.0, 0.0, 0.0)
 #: Pixels of the quick first image of a large viewport (one sample, then full resolution).
 COARSE_PIXELS = 16384
 
@@ -146,7 +145,7 @@ def viewport_border(context, scene):
         frame = frame_in_region(rv3d.perspective_matrix, corners)
         border = camera_border(frame, (render.border_min_x, render.border_min_y,
                                        render.border_max_x, render.border_max_y))
-        return border if border is not None else (0.0, 0.0, 0.0, 0.0)
+        return border if border is not None else EMPTY_BORDER
     if getattr(space, "use_render_border", False):
         return (space.render_border_min_x, space.render_border_min_y,
                 space.render_border_max_x, space.render_border_max_y)
@@ -171,6 +170,13 @@ def draw_pixels(image: np.ndarray, window, size: tuple[int, int]) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- the worker
+
+def _geometry(desc) -> tuple[tuple, tuple]:
+    """(window, size) of ``desc``'s image: (x0, y0, w, h) and the frame's (width, height)."""
+    from ercuts_core.camera import render_window
+
+    return render_window(desc.camera).rect, (desc.camera.width, desc.camera.height)
+
 
 @dataclass
 class Frame:
@@ -253,11 +259,7 @@ class ViewportSession:
         if render is None:
             import ercuts_core
             render = ercuts_core.render
-        from ercuts_core.camera import render_window
-
-        w = render_window(desc.camera)
-        window, size = (w.x0, w.y0, w.width, w.height), (desc.camera.width, desc.camera.height)
-        samples = [0]
+        window, size = _geometry(desc)
         t0 = time.monotonic()
 
         def progress(fraction, message):
@@ -267,8 +269,7 @@ class ViewportSession:
             return not stop.is_set()
 
         def preview(image):
-            samples[0] += 1
-            self._publish(generation, Frame(np.array(image, np.float32), window, size, samples[0]))
+            self._publish(generation, Frame(np.array(image, np.float32), window, size))
 
         try:
             self._coarse_pass(generation, stop, desc, settings, render, size)
@@ -292,18 +293,11 @@ class ViewportSession:
         factor = int(np.ceil(np.sqrt(width * height / COARSE_PIXELS)))
         if factor < 2:
             return
-        cam = desc.camera
         small = desc.replace(camera=dataclasses.replace(
-            cam, width=max(width // factor, 1), height=max(height // factor, 1)))
-        from ercuts_core.camera import render_window
-
+            desc.camera, width=max(width // factor, 1), height=max(height // factor, 1)))
         result = render(small, settings.replace(samples=1), progress=lambda f, m: not stop.is_set())
-        if result.cancelled:
-            return
-        w = render_window(small.camera)
-        self._publish(generation, Frame(np.asarray(result.image, np.float32),
-                                        (w.x0, w.y0, w.width, w.height),
-                                        (small.camera.width, small.camera.height), 0))
+        if not result.cancelled:
+            self._publish(generation, Frame(np.asarray(result.image, np.float32), *_geometry(small)))
 
     def _publish(self, generation, frame, status=None, done=False) -> None:
         with self._lock:
@@ -325,17 +319,14 @@ class SceneState:
     origin: tuple = (0.0, 0.0, 0.0)
     version: int = 0
     error: str | None = None
-    warnings: tuple = ()
 
 
 def viewport_settings(scene):
     """Core settings for the viewport: the scene's, with the viewport integrator and samples,
     no time limit (the viewport keeps refining until the samples are done)."""
-    ercuts = scene.ercuts
-    integrator = ercuts.viewport_integrator
-    if integrator not in VIEWPORT_INTEGRATORS:
-        integrator = "PATH"
-    return ercuts.to_core(seed=ercuts.seed_for_frame(scene.frame_current), integrator=integrator,
+    ercuts = scene.ercuts           # viewport_integrator offers PATH and BDPT only (properties.py)
+    return ercuts.to_core(seed=ercuts.seed_for_frame(scene.frame_current),
+                          integrator=ercuts.viewport_integrator,
                           samples=int(ercuts.viewport_samples), time_limit=0.0)
 
 
@@ -349,11 +340,9 @@ def view_update(engine, context, depsgraph) -> None:
         from .export import export_scene
 
         exported = export_scene(depsgraph, require_camera=False)
-        desc = exported.description
-        state.description, state.error = desc, None
+        state.description, state.error = exported.description, None
         state.origin = tuple(exported.stats.get("origin", (0.0, 0.0, 0.0)))
-        state.warnings = tuple(dict.fromkeys(exported.warnings))
-        for w in state.warnings:
+        for w in dict.fromkeys(exported.warnings):
             print(f"Ercuts viewport warning: {w}")
     except Exception as exc:  # noqa: BLE001 - an export error is the viewport's status
         from .engine import ErcutsRenderEngine
@@ -383,18 +372,19 @@ def view_draw(engine, context, depsgraph) -> None:
         return
     if state.description is None:
         return
-    pixel_size = int(engine.get_preview_pixel_size(scene))
-    width, height, _, border = key = region_key(context, scene, pixel_size)
-    key = (state.version, key, viewport_settings(scene))
+    region = region_key(context, scene, int(engine.get_preview_pixel_size(scene)))
+    settings = viewport_settings(scene)
+    key = (state.version, region, settings)
     if key != session.key:
-        if border == (0.0, 0.0, 0.0, 0.0):     # the border lies outside the region
+        width, height, _, border = region
+        if border == EMPTY_BORDER:
             session.stop()
             session.key, session.frame = key, None
         else:
             rv3d = context.region_data
             camera = region_camera(rv3d.view_matrix, rv3d.window_matrix, width, height,
                                    state.origin, border)
-            session.start(key, state.description.replace(camera=camera), key[2])
+            session.start(key, state.description.replace(camera=camera), settings)
     if session.error is not None:
         engine.update_stats("Ercuts", f"Error: {session.error}")
     else:

@@ -56,8 +56,8 @@ OUT = os.path.join(ROOT, "benchmarks", "results")
 PROFILES = os.path.join(OUT, "profiles")
 #: ErcutsIntegrator methods (and the functions they call) → phase key of result.timings.
 PHASE_OF_FUNCTION = {
-    "_rough_bdpt": "bdpt", "_direct_passes": "direct", "build_gbuffer": "seeds", "_direct_image": "seeds", "_seeds": "seeds",
-    "run_chains": "chains", "make_vpls": "vpls", "_gather": "cuts",
+    "_rough_bdpt": "bdpt", "_direct_passes": "direct", "build_gbuffer": "seeds",
+    "_direct_image": "seeds", "_seeds": "seeds", "run_chains": "chains", "make_vpls": "vpls", "_gather": "cuts",
 }
 ERCUTS_PHASES = ("bdpt", "direct", "seeds", "chains", "vpls", "tree", "cuts")
 #: Hot spots removed (one commit each; before/after measured interleaved as CPU seconds,

@@ -37,6 +37,11 @@ class Window:
     def n_pixels(self) -> int:
         return self.width * self.height
 
+    @property
+    def rect(self) -> tuple[int, int, int, int]:
+        """(x0, y0, width, height): the ``window`` tuple of :class:`RenderResult`."""
+        return (self.x0, self.y0, self.width, self.height)
+
 
 def view_plane(desc: CameraDesc) -> tuple[float, float, float, float]:
     """(xmin, xmax, ymin, ymax) of the image plane at z = −1 (persp) or z = 0 (ortho), camera space."""

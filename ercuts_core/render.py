@@ -154,7 +154,7 @@ def render(desc: SceneDescription, settings: RenderSettings | None = None,
     timings["total"] = time.perf_counter() - clock.start
     return RenderResult(
         image=film.image(),
-        window=(window.x0, window.y0, window.width, window.height),
+        window=window.rect,
         full_size=(scene.camera.width, scene.camera.height),
         timings=timings, stats=stats, issues=checked.issues,
         cancelled=clock.cancelled, aovs=film.aovs(),

@@ -128,7 +128,7 @@ def _no_aov_render(desc, settings=None, progress=None):
 
     w = render_window(desc.camera)
     image = np.full((w.height, w.width, 4), 0.5, np.float32)
-    return RenderResult(image=image, window=(w.x0, w.y0, w.width, w.height),
+    return RenderResult(image=image, window=w.rect,
                         full_size=(desc.camera.width, desc.camera.height))
 
 

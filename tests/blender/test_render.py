@@ -47,7 +47,7 @@ def _coordinate_image_render(desc, settings=None, progress=None):
     image = np.stack([xs + 0.5, ys + 0.5, np.full_like(xs, 7), np.ones_like(xs)], axis=2)
     if progress is not None:
         progress(1.0, "synthetic")
-    return RenderResult(image=image, window=(w.x0, w.y0, w.width, w.height),
+    return RenderResult(image=image, window=w.rect,
                         full_size=(desc.camera.width, desc.camera.height))
 
 

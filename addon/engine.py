@@ -25,6 +25,8 @@ import traceback
 
 import bpy
 
+from .errors import error_message
+
 #: Details of the last final render, for tests and debugging (plain Python data only).
 last_render: dict = {}
 
@@ -32,8 +34,19 @@ last_render: dict = {}
 #: VPLs or light tree to build), few samples, shallow paths, at most 2 s.
 PREVIEW_LIMITS = dict(integrator="PATH", samples=8, max_depth=4, time_limit=2.0)
 
-#: Phase names that start the core's progress messages (``ercuts_core.render``).
-PHASES = ("BDPT", "Direct light", "ER chains", "VPLs", "Light tree", "Lightcuts", "PATH")
+#: Phase names that start the core's progress messages: the Ercuts phases
+#: (``ercuts_core.integrators.ercuts.pacing.PHASES``, read by :func:`phases`) and the pass
+#: integrators' names.
+PASS_PHASES = ("BDPT", "PATH")
+
+
+def phases() -> tuple:
+    """Every phase name a core progress message may start with (the core's own list)."""
+    try:
+        from ercuts_core.integrators.ercuts.pacing import PHASES
+    except ImportError:  # no numpy in this Python: no core, no progress messages either
+        return PASS_PHASES
+    return tuple(dict.fromkeys((*PHASES, *PASS_PHASES)))
 
 
 def preview_settings(settings):
@@ -48,7 +61,7 @@ def preview_settings(settings):
 
 def phase_of(message: str) -> str:
     """The phase a core progress message names (its known prefix, else its first field)."""
-    for phase in PHASES:
+    for phase in phases():
         if message.startswith(phase):
             return phase
     return message.split("|")[0].strip().split(" ")[0] if message else ""
@@ -96,22 +109,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
 
     @staticmethod
     def _error_message(exc: Exception) -> str:
-        known = ()
-        try:  # both import numpy: without it, fall through to the dependency message
-            from .export import ExportError
-            known += (ExportError,)
-            from ercuts_core.validate import SceneError
-            known += (SceneError,)
-        except ImportError:
-            pass
-        if isinstance(exc, known):
-            return str(exc)
-        missing = getattr(exc, "name", None) or ""
-        if isinstance(exc, ModuleNotFoundError) and missing.split(".")[0] in {
-                "numpy", "embreex", "ercuts_core"}:
-            return (f"cannot load the Ercuts core ({exc}); numpy, embreex and ercuts_core "
-                    "must be importable by Blender's Python")
-        return f"{type(exc).__name__}: {exc} (see the console for details)"
+        return error_message(exc)
 
     # ------------------------------------------------------------------ viewport
     def view_update(self, context, depsgraph):

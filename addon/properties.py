@@ -31,6 +31,19 @@ SEEDING_ITEMS = (
     ("BDPT", "Bidirectional", "Seed the chains from bidirectional paths (the paper)", 0),
     ("PATH", "Path Tracing", "Seed the chains from unidirectional paths", 1),
 )
+LIGHTCUT_ERROR_ITEMS = (
+    ("NODE", "Per Node", "Refine the cut while some node's error bound exceeds the threshold "
+     "(Walter et al. 2005's practice)", 0),
+    ("TOTAL", "Total", "Refine the cut while the sum of the nodes' error bounds exceeds the "
+     "threshold (the paper's equation 5)", 1),
+    ("LITERAL", "Literal", "The paper's per-node text |estimate - exact| < threshold; an "
+     "ablation, not a bound", 2),
+)
+TREE_PAIRING_ITEMS = (
+    ("PLOC", "Half per Level", "Pair mutual best matches until half the clusters are paired, "
+     "then go up a level", 0),
+    ("GREEDY", "Greedy", "Pair mutual best matches until none are left on a level (ablation)", 1),
+)
 DIRECT_LIGHT_ITEMS = (
     ("NEE", "Light Sampling", "Direct light by anti-aliased next-event estimation from every light; "
      "virtual point lights carry the indirect light only", 0),
@@ -162,7 +175,8 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
     )
     multichain_perturbation: BoolProperty(
         name="Multi-chain Perturbation",
-        description="Use Veach's multi-chain perturbation (several specular chains)",
+        description=("Use Veach's multi-chain perturbation (several specular chains); inactive "
+                     "until the core has perfectly specular materials, so not shown"),
         default=_default("multichain_perturbation", True),
     )
     bidirectional_mutation: BoolProperty(
@@ -186,6 +200,18 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         description="How shading points collect light from the virtual point lights",
         items=GATHER_ITEMS,
         default=_default("gather", "LIGHTCUTS"),
+    )
+    lightcut_error: EnumProperty(
+        name="Lightcut Error",
+        description="Which error a lightcut bounds by the threshold",
+        items=LIGHTCUT_ERROR_ITEMS,
+        default=_default("lightcut_error", "NODE"),
+    )
+    tree_pairing: EnumProperty(
+        name="Tree Pairing",
+        description="How the light tree pairs clusters of virtual point lights",
+        items=TREE_PAIRING_ITEMS,
+        default=_default("tree_pairing", "PLOC"),
     )
     seeding: EnumProperty(
         name="Seeding",
@@ -290,17 +316,12 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         del bpy.types.Scene.ercuts
 
 
-#: Names of the mirrored settings, in ``RenderSettings`` order.
-PROPERTY_NAMES = ("integrator", "samples", "seed", "max_depth", "rr_depth", "time_limit",
-                  "film_transparent", "batch_rays", "threads", "max_error", "chains_per_pixel",
-                  "chain_length", "lens_perturbation", "caustic_perturbation",
-                  "multichain_perturbation", "bidirectional_mutation", "max_cut_size", "clamp",
-                  "gather", "seeding", "direct_light", "direct_samples", "shading_samples",
-                  "e1_samples", "memory_budget_mb")
-
 #: Properties of ``scene.ercuts`` that the add-on adds on top of the mirror (not core settings).
 ADDON_ONLY_NAMES = ("max_error_percent", "use_animated_seed", "use_denoising", "viewport_integrator",
                     "viewport_samples", "write_sidecar")
+#: Names of the mirrored settings, in ``RenderSettings`` order (the class's own order; the
+#: mirror test checks it against the core).
+PROPERTY_NAMES = tuple(n for n in ErcutsRenderSettings.__annotations__ if n not in ADDON_ONLY_NAMES)
 
 
 def _pass_toggle(pass_def) -> BoolProperty:

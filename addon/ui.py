@@ -143,7 +143,7 @@ class ERCUTS_RENDER_PT_mutations(ErcutsPanel, bpy.types.Panel):
         col = layout.column(heading="Mutations", align=True)
         col.prop(settings, "lens_perturbation", text="Lens")
         col.prop(settings, "caustic_perturbation", text="Caustic")
-        col.prop(settings, "multichain_perturbation", text="Multi-chain")
+        # multichain_perturbation is not drawn: it needs perfectly specular materials.
         col.prop(settings, "bidirectional_mutation", text="Bidirectional")
 
 
@@ -161,6 +161,8 @@ class ERCUTS_RENDER_PT_ercuts_advanced(ErcutsPanel, bpy.types.Panel):
         layout.prop(settings, "direct_light")
         layout.prop(settings, "seeding")
         layout.prop(settings, "gather")
+        layout.prop(settings, "lightcut_error")
+        layout.prop(settings, "tree_pairing")
         col = layout.column(align=True)
         col.prop(settings, "shading_samples")
         col.prop(settings, "e1_samples")

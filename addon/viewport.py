@@ -35,6 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import error_message
+
 #: Largest value an RGBA16F texture holds.
 HALF_MAX = 65000.0
 #: ``viewport_border`` when the border lies wholly outside the region: nothing to render.
@@ -345,9 +347,7 @@ def view_update(engine, context, depsgraph) -> None:
         for w in dict.fromkeys(exported.warnings):
             print(f"Ercuts viewport warning: {w}")
     except Exception as exc:  # noqa: BLE001 - an export error is the viewport's status
-        from .engine import ErcutsRenderEngine
-
-        state.description, state.error = None, ErcutsRenderEngine._error_message(exc)
+        state.description, state.error = None, error_message(exc)
         print(f"Ercuts viewport: {state.error}")
         traceback.print_exc()
     state.version += 1

@@ -23,16 +23,13 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
+from benchmarks.metrics import relmse  # noqa: E402
 from ercuts_core import RenderSettings, render  # noqa: E402
 from ercuts_core.image_io import linear_to_srgb  # noqa: E402
 from ercuts_core.sampling import luminance  # noqa: E402
 from ercuts_core.scenes import s_corridor  # noqa: E402
 
 OUT = os.path.join(ROOT, "benchmarks", "results")
-
-
-def relmse(x, r):
-    return float(np.mean((x - r) ** 2 / (r**2 + 1e-2)))
 
 
 def reference(w: int, h: int, runs: int, spp: int) -> tuple[np.ndarray, np.ndarray]:

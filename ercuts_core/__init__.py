@@ -8,8 +8,17 @@ Public API::
 
 This package never imports bpy: the Blender add-on hands it a :class:`SceneDescription`.
 """
-from .description import (AreaLights, CameraDesc, MaterialTable, MeshTable, PointLights,
-                          SceneDescription, SunLights, load_npz, save_npz)
+from .description import (
+                          AreaLights,
+                          CameraDesc,
+                          MaterialTable,
+                          MeshTable,
+                          PointLights,
+                          SceneDescription,
+                          SunLights,
+                          load_npz,
+                          save_npz,
+)
 from .render import render
 from .result import RenderResult
 from .settings import RenderSettings

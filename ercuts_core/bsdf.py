@@ -48,8 +48,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from .arrays import take_rows
 from .description import MaterialTable
-from .sampling import (INV_PI, coordinate_system, luminance, sample_cosine_hemisphere,
-                       to_local, to_world)
+from .sampling import INV_PI, coordinate_system, luminance, sample_cosine_hemisphere, to_local, to_world
+from .vecmath import dot
 
 F64 = NDArray[np.float64]
 B = NDArray[np.bool_]
@@ -64,10 +64,6 @@ COS_EPS = 1e-10
 # Vector helpers
 # ---------------------------------------------------------------------------------------
 
-def _dot(a: F64, b: F64) -> F64:
-    """Row-wise dot product of (N, 3) arrays → (N,)."""
-    return np.einsum("ij,ij->i", a, b)
-
 
 def _div(num: F64, den: F64) -> F64:
     """num/den where den > 0, else 0 (no floating-point warnings); broadcasts like ``/``."""
@@ -79,7 +75,7 @@ def _div(num: F64, den: F64) -> F64:
 
 def _normalize(v: F64) -> F64:
     """Unit rows of (N, 3) ``v``; zero rows stay zero."""
-    length = np.sqrt(_dot(v, v))
+    length = np.sqrt(dot(v, v))
     return _div(v, length[:, None])
 
 
@@ -91,7 +87,7 @@ def _oriented_normals(ns: ArrayLike, ng: ArrayLike) -> tuple[F64, F64]:
     """Unit (ns, ng), ns put on ng's side (inverted custom normals); zero rows stay zero."""
     ng = _normalize(_as3(ng))
     ns = _normalize(_as3(ns))
-    return np.where((_dot(ns, ng) < 0.0)[:, None], -ns, ns), ng
+    return np.where((dot(ns, ng) < 0.0)[:, None], -ns, ns), ng
 
 
 def _lobe_params(base_color: ArrayLike, roughness: ArrayLike, metallic: ArrayLike,
@@ -275,7 +271,7 @@ class Bsdf:
 
     def _flipped_normals(self, wo: F64) -> tuple[F64, F64]:
         """(ns, ng) flipped per lane onto the side of wo (two-sided surfaces)."""
-        sign = np.where(_dot(wo, self.ng) < 0.0, -1.0, 1.0)[:, None]   # ×(±1) is exact
+        sign = np.where(dot(wo, self.ng) < 0.0, -1.0, 1.0)[:, None]   # ×(±1) is exact
         return self.ns * sign, self.ng * sign
 
     def _eval_pdf(self, wo: F64, wi: F64, flipped: tuple[F64, F64] | None = None
@@ -286,15 +282,15 @@ class Bsdf:
             f (N, 3) [sr⁻¹], pdf (N,) [sr⁻¹], cos_i = ns·wi (N,), valid (N,) bool.
         """
         ns, ng = self._flipped_normals(wo) if flipped is None else flipped
-        cos_o, cos_i = _dot(wo, ns), _dot(wi, ns)
+        cos_o, cos_i = dot(wo, ns), dot(wi, ns)
         valid = ((cos_o > COS_EPS) & (cos_i > COS_EPS)
-                 & (_dot(wo, ng) > COS_EPS) & (_dot(wi, ng) > COS_EPS))
+                 & (dot(wo, ng) > COS_EPS) & (dot(wi, ng) > COS_EPS))
         if self.all_diffuse:
             # Lambert only: f = kd/π, pdf = cos_i/π on the valid set (see all_diffuse).
             w = np.where(valid, INV_PI, 0.0)          # kd ≥ 0 finite: kd·0 = +0 exactly
             return self.kd * w[:, None], np.where(valid, cos_i * INV_PI, 0.0), cos_i, valid
         # Half vector terms; wo + wi is computed the same way for (wo, wi) and (wi, wo)
-        h_len = np.sqrt(_dot(wo + wi, wo + wi))
+        h_len = np.sqrt(dot(wo + wi, wo + wi))
         cos_h = np.clip(_div(cos_o + cos_i, h_len), 0.0, 1.0)
         cos_d = np.clip(0.5 * h_len, 0.0, 1.0)  # wi·h = |wo + wi|/2 for unit wo, wi
         D = ggx_d(cos_h, self.alpha)
@@ -348,7 +344,7 @@ class Bsdf:
                 wo_l = np.where((wo_l[:, 2] > COS_EPS)[:, None], wo_l, [0.0, 0.0, 1.0])
                 # Specular: reflect wo about a visible GGX normal; diffuse: cosine lobe
                 m = sample_ggx_vndf(wo_l, self.alpha, u[:, 1:3])
-                wi_spec = 2.0 * _dot(wo_l, m)[:, None] * m - wo_l
+                wi_spec = 2.0 * dot(wo_l, m)[:, None] * m - wo_l
                 wi_l = np.where((u[:, 0] < self.p_spec)[:, None], wi_spec, wi_l)
             wi = _normalize(to_world(wi_l, t, b, ns))
             f, pdf, cos_i, valid = self._eval_pdf(wo, wi, flipped)

@@ -42,6 +42,27 @@ class Window:
         """(x0, y0, width, height): the ``window`` tuple of :class:`RenderResult`."""
         return (self.x0, self.y0, self.width, self.height)
 
+    def raster(self, pix: NDArray) -> NDArray:
+        """(N, 2) int64 full-frame raster position of the top-left corner of window pixels
+        ``pix`` (N,) (row-major, top row first)."""
+        return np.stack([self.x0 + pix % self.width, self.y0 + pix // self.width], axis=1)
+
+    def pixel_xy(self, raster: NDArray, clip: bool = False) -> tuple[NDArray, NDArray]:
+        """(ix, iy) (N,) int64 window column and row of full-frame raster positions (N, 2);
+        with ``clip``, clamped into the window."""
+        ix = np.floor(raster[:, 0]).astype(np.int64) - self.x0
+        iy = np.floor(raster[:, 1]).astype(np.int64) - self.y0
+        if clip:
+            ix, iy = np.clip(ix, 0, self.width - 1), np.clip(iy, 0, self.height - 1)
+        return ix, iy
+
+    def pixel(self, raster: NDArray, clip: bool = False) -> tuple[NDArray, NDArray]:
+        """((N,) window pixel index, (N,) inside the window) of raster positions (N, 2); with
+        ``clip``, positions outside are clamped to the nearest pixel (all inside)."""
+        ix, iy = self.pixel_xy(raster, clip)
+        inside = (ix >= 0) & (ix < self.width) & (iy >= 0) & (iy < self.height)
+        return iy * self.width + ix, inside
+
 
 def view_plane(desc: CameraDesc) -> tuple[float, float, float, float]:
     """(xmin, xmax, ymin, ymax) of the image plane at z = −1 (persp) or z = 0 (ortho), camera space."""

@@ -96,14 +96,12 @@ class Film:
         """Splat (N, 3) radiance at full-frame raster positions (N, 2); outside-window ones are
         dropped. ``cls`` (N,): path class of each splat (:func:`path_class`)."""
         w = self.window
-        ix = np.floor(raster[:, 0]).astype(np.int64) - w.x0
-        iy = np.floor(raster[:, 1]).astype(np.int64) - w.y0
-        ok = (ix >= 0) & (ix < w.width) & (iy >= 0) & (iy < w.height)
+        pix, ok = w.pixel(raster)
         if cls is None:
             self.classified = False
         if not ok.any():
             return
-        pix = iy[ok] * w.width + ix[ok]
+        pix = pix[ok]
         L = self._finite(L[ok])[0]
         self._add(self.splat, pix, L)
         if cls is not None:

@@ -34,16 +34,22 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .description import SHAPE_ELLIPSE, SceneDescription
-from .sampling import (Distribution1D, coordinate_system, luminance, sample_cosine_hemisphere,
-                       sample_uniform_cone, sample_uniform_disk_concentric, sample_uniform_sphere,
-                       sample_uniform_triangle, to_world)
+from .sampling import (
+    Distribution1D,
+    coordinate_system,
+    luminance,
+    sample_cosine_hemisphere,
+    sample_uniform_cone,
+    sample_uniform_disk_concentric,
+    sample_uniform_sphere,
+    sample_uniform_triangle,
+    to_world,
+)
+from .vecmath import dot
 
 POINT, SUN, AREA, TRI, ENV = 0, 1, 2, 3, 4
 _INV_4PI = 1.0 / (4.0 * np.pi)
 
-
-def _dot(a: NDArray, b: NDArray) -> NDArray:
-    return np.einsum("ij,ij->i", a, b)
 
 
 def _normalize(v: NDArray) -> tuple[NDArray, NDArray]:
@@ -202,7 +208,7 @@ class LightSet:
     # ------------------------------------------------------------ emitter geometry
     def spot_factor(self, i: NDArray, w_out: NDArray) -> NDArray:
         """(N,) Cycles spot falloff for point lights ``i`` emitting along unit ``w_out``."""
-        c = _dot(self.pt_axis[i], w_out)
+        c = dot(self.pt_axis[i], w_out)
         cos_h = self.pt_cos[i]
         width = (1.0 - cos_h) * self.pt_blend[i]
         soft = smoothstep((c - cos_h) / np.where(width > 0, width, 1.0))
@@ -282,7 +288,7 @@ class LightSet:
         is_delta = (kind == POINT) | (kind == SUN)
         # Solid-angle density for surface emitters: p_A · d² / |cos_l|.
         surf = (kind == AREA) | (kind == TRI)
-        cos_l = -_dot(nl, wi)
+        cos_l = -dot(nl, wi)
         facing = np.where(kind == AREA, cos_l > 0, np.abs(cos_l) > 0)
         Li = np.where((surf & facing)[:, None], Lsurf, Li)
         pdf_dir = np.where(surf, np.maximum(np.where(kind == AREA, cos_l, np.abs(cos_l)), 0) / np.pi
@@ -311,7 +317,7 @@ class LightSet:
         out = np.zeros(len(prim))
         if m.any():
             w, d = _normalize(p[m] - x[m])
-            cos_l = np.abs(_dot(ng[m], w))
+            cos_l = np.abs(dot(ng[m], w))
             area = self.tri_area[self.local[light[m]]]
             out[m] = self.pmf(light[m]) / area * d**2 / np.maximum(cos_l, 1e-300)
         return out
@@ -424,7 +430,7 @@ class LightSet:
         m = kind == POINT
         if m.any():
             cos_h = self.pt_cos[loc[m]]
-            inside = _dot(self.pt_axis[loc[m]], d[m]) >= cos_h
+            inside = dot(self.pt_axis[loc[m]], d[m]) >= cos_h
             pdf_dir[m] = np.where(cos_h > -1, inside / (2 * np.pi * (1 - cos_h)), _INV_4PI)
         m = (kind == SUN) | (kind == ENV)
         pdf_pos[m] = 1.0 / (np.pi * self.radius**2)
@@ -433,9 +439,9 @@ class LightSet:
         m = kind == AREA
         if m.any():
             pdf_pos[m] = 1.0 / self.ar_area[loc[m]]
-            pdf_dir[m] = np.maximum(_dot(n[m], d[m]), 0) / np.pi
+            pdf_dir[m] = np.maximum(dot(n[m], d[m]), 0) / np.pi
         m = kind == TRI
         if m.any():
             pdf_pos[m] = 1.0 / self.tri_area[loc[m]]
-            pdf_dir[m] = np.abs(_dot(n[m], d[m])) / np.pi * 0.5
+            pdf_dir[m] = np.abs(dot(n[m], d[m])) / np.pi * 0.5
         return pdf_pos * sel, pdf_dir

@@ -24,6 +24,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .vecmath import dot
+
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
@@ -106,9 +108,9 @@ def coordinate_system(n: ArrayLike) -> tuple[F64, F64]:
 def to_local(v: ArrayLike, t: ArrayLike, b: ArrayLike, n: ArrayLike) -> F64:
     """Express world vectors in the frame (t, b, n): returns (v·t, v·b, v·n), shape (N, 3)."""
     v = _as3(v)
-    return np.stack([np.einsum("ij,ij->i", v, _as3(t)),
-                     np.einsum("ij,ij->i", v, _as3(b)),
-                     np.einsum("ij,ij->i", v, _as3(n))], axis=1)
+    return np.stack([dot(v, _as3(t)),
+                     dot(v, _as3(b)),
+                     dot(v, _as3(n))], axis=1)
 
 
 def to_world(v_local: ArrayLike, t: ArrayLike, b: ArrayLike, n: ArrayLike) -> F64:
@@ -357,41 +359,16 @@ class Distribution1D:
 # Multiple importance sampling
 # ---------------------------------------------------------------------------------------
 
-def _mis_weight(f: F64, g: F64, power: float) -> F64:
-    """(f^β)/(f^β + g^β) with f, g >= 0, safe for 0 and inf, no overflow/underflow."""
-    f, g = np.broadcast_arrays(np.maximum(np.asarray(f, np.float64), 0.0),
-                               np.maximum(np.asarray(g, np.float64), 0.0))
-    f_inf, g_inf = np.isinf(f), np.isinf(g)
-    # Scale by the larger value so both ratios lie in [0, 1]: no overflow when squaring
-    m = np.maximum(f, g)
-    finite = np.isfinite(m) & (m > 0.0)
-    m_safe = np.where(finite, m, 1.0)
-    fr = np.where(finite, f, 0.0) / m_safe
-    gr = np.where(finite, g, 0.0) / m_safe
-    # Ratios below 1e-150 are 0 to first order; dropping them avoids underflow in x²
-    fr = np.where(fr < 1e-150, 0.0, fr)
-    gr = np.where(gr < 1e-150, 0.0, gr)
-    if power != 1.0:
-        fr, gr = fr ** power, gr ** power
-    w = _safe_div(fr, fr + gr)
-    # A delta (inf) strategy takes all the weight; two deltas share it
-    w = np.where(f_inf & ~g_inf, 1.0, w)
-    w = np.where(g_inf & ~f_inf, 0.0, w)
-    return np.where(f_inf & g_inf, 0.5, w)
+def power_heuristic(pdf_a: ArrayLike, pdf_b: ArrayLike) -> F64:
+    """MIS weight of strategy a, p_a² / (p_a² + p_b²) [Veach 1997, eq. 9.14, β = 2].
 
-
-def balance_heuristic(n_f: ArrayLike, pdf_f: ArrayLike, n_g: ArrayLike, pdf_g: ArrayLike) -> F64:
-    """Balance heuristic n_f p_f / (n_f p_f + n_g p_g) [Veach 1997, eq. 9.13].
-
-    Vectorized; returns 0 where both pdfs are 0, 1 where only ``pdf_f`` is inf, 0 where only
-    ``pdf_g`` is inf and 0.5 where both are inf.
+    Vectorized, computed through the ratio p_b/p_a (no overflow of p²); 0 where p_a is 0,
+    1 where only p_a is inf, 0 where only p_b is inf, 0.5 where both are inf.
     """
-    return _mis_weight(np.asarray(n_f, np.float64) * pdf_f, np.asarray(n_g, np.float64) * pdf_g, 1.0)
-
-
-def power_heuristic(n_f: ArrayLike, pdf_f: ArrayLike, n_g: ArrayLike, pdf_g: ArrayLike) -> F64:
-    """Power heuristic (β = 2) (n_f p_f)² / ((n_f p_f)² + (n_g p_g)²) [Veach 1997, eq. 9.14].
-
-    Same conventions for 0 and inf pdfs as :func:`balance_heuristic`.
-    """
-    return _mis_weight(np.asarray(n_f, np.float64) * pdf_f, np.asarray(n_g, np.float64) * pdf_g, 2.0)
+    pdf_a, pdf_b = np.asarray(pdf_a, np.float64), np.asarray(pdf_b, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        r = pdf_b / pdf_a
+        w = 1.0 / (1.0 + r * r)
+    inf_a = np.isinf(pdf_a) & (pdf_a > 0)
+    return np.where((pdf_a > 0) & np.isfinite(w), w,
+                    np.where(inf_a, np.where(np.isinf(pdf_b), 0.5, 1.0), 0.0))

@@ -16,6 +16,7 @@ from .camera import Camera
 from .description import SceneDescription
 from .lights import LightSet
 from .tracer import Hit, Tracer
+from .vecmath import dot
 
 
 @dataclass
@@ -91,7 +92,7 @@ class BuiltScene:
             use = take_rows(self.tri_smooth, prim) & (ln > 1e-8)
             interp = interp / np.maximum(ln, 1e-300)[:, None]
             # Keep the shading normal on the geometric normal's side.
-            flip = np.einsum("ij,ij->i", interp, ng) < 0
+            flip = dot(interp, ng) < 0
             interp[flip] *= -1.0
             ns = np.where(use[:, None], interp, ng)
         return Surface(valid, p, ng, ns, hit.prim, take_rows(self.tri_mat, prim), hit.t)

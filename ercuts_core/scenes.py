@@ -7,8 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .description import (AreaLights, CameraDesc, MaterialTable, MeshTable, PointLights,
-                          SceneDescription)
+from .description import AreaLights, CameraDesc, MaterialTable, MeshTable, PointLights, SceneDescription
 
 
 class _Builder:

@@ -13,6 +13,8 @@ INTEGRATORS = ("ERCUTS", "BDPT", "PATH")
 GATHERS = ("LIGHTCUTS", "BRUTE_FORCE")
 SEEDINGS = ("BDPT", "PATH")
 DIRECT_LIGHTS = ("NEE", "VPL")
+LIGHTCUT_ERRORS = ("NODE", "TOTAL", "LITERAL")
+TREE_PAIRINGS = ("PLOC", "GREEDY")
 
 
 @dataclass(frozen=True)
@@ -42,6 +44,14 @@ class RenderSettings:
             diagonal (cosθ/d² ≤ 1/(clamp·diagonal)²); 0 = off. The removed energy is reported.
         gather: 'LIGHTCUTS' (the light tree) or 'BRUTE_FORCE' (every VPL at every shading
             point: the ablation that shows the tree's role).
+        lightcut_error: the lightcut stopping rule (:func:`~ercuts_core.integrators.ercuts.
+            lightcuts.lightcut`): 'NODE' refines while some cut node's error bound exceeds
+            ``max_error`` of the estimate (Walter et al. 2005's practice); 'TOTAL' bounds the
+            *sum* of the nodes' bounds (the paper's eq. (5)); 'LITERAL' the paper's text
+            |L̄ − L| < ε·L per node (an ablation, not a bound).
+        tree_pairing: how the light tree pairs clusters level by level: 'PLOC' (mutual-best
+            rounds until half the clusters are paired) or 'GREEDY' (every mutual-best round
+            to the end); an ablation (:mod:`~ercuts_core.integrators.ercuts.light_tree`).
         seeding: 'BDPT' (paper: seed chains from bidirectional paths) or 'PATH'.
         direct_light: how ERCUTS renders light that reaches the camera after one
             scattering: 'NEE' (default) with ``samples`` anti-aliased passes of next-event
@@ -76,6 +86,8 @@ class RenderSettings:
     max_cut_size: int = 1000
     clamp: float = 0.02
     gather: str = "LIGHTCUTS"
+    lightcut_error: str = "NODE"
+    tree_pairing: str = "PLOC"
     seeding: str = "BDPT"
     direct_light: str = "NEE"
     direct_samples: int = 64
@@ -96,6 +108,10 @@ class RenderSettings:
             raise ValueError(f"batch_rays must be >= 1024, got {self.batch_rays}")
         if self.gather not in GATHERS:
             raise ValueError(f"unknown gather {self.gather!r}; expected one of {GATHERS}")
+        if self.lightcut_error not in LIGHTCUT_ERRORS:
+            raise ValueError(f"unknown lightcut_error {self.lightcut_error!r}; expected one of {LIGHTCUT_ERRORS}")
+        if self.tree_pairing not in TREE_PAIRINGS:
+            raise ValueError(f"unknown tree_pairing {self.tree_pairing!r}; expected one of {TREE_PAIRINGS}")
         if self.seeding not in SEEDINGS:
             raise ValueError(f"unknown seeding {self.seeding!r}; expected one of {SEEDINGS}")
         if self.direct_light not in DIRECT_LIGHTS:
@@ -126,7 +142,7 @@ class RenderSettings:
     @property
     def direct_vpls(self) -> bool:
         """ERCUTS chains and VPLs also carry direct light (``direct_light='VPL'``, the paper);
-        the target class of :func:`~ercuts_core.paths.is_target`."""
+        the target class of :func:`~ercuts_core.integrators.ercuts.paths.is_target`."""
         return self.direct_light == "VPL"
 
     def replace(self, **changes) -> "RenderSettings":

@@ -26,6 +26,8 @@ from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 from numpy.typing import NDArray
 
+from .vecmath import dot
+
 #: Relative float32 precision used for the position-dependent part of the offset.
 _F32_ULP = 2.0**-23
 #: Minimum batch size worth splitting over threads.
@@ -95,7 +97,7 @@ class Tracer:
         Returns:
             (N, 3) float64 ray origins.
         """
-        side = np.where(np.einsum("ij,ij->i", ng, d) >= 0.0, 1.0, -1.0)
+        side = np.where(dot(ng, d) >= 0.0, 1.0, -1.0)
         return p + (side * self.epsilon(p))[:, None] * ng
 
     # ------------------------------------------------------------------ queries
@@ -167,7 +169,7 @@ class Tracer:
         o0 = p0 if ng0 is None else self.offset(p0, ng0, d)
         o1 = p1 if ng1 is None else self.offset(p1, ng1, -d)
         seg = o1 - o0
-        dist = np.sqrt(np.einsum("ij,ij->i", seg, seg))
+        dist = np.sqrt(dot(seg, seg))
         ok = dist > 0
         if ok.all():  # the usual case: no zero-length segment to guard
             return ~self.occluded(o0, seg / dist[:, None], dist * (1.0 - 1e-6))

@@ -16,8 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .description import (AreaLights, MaterialTable, MeshTable, PointLights, SceneDescription,
-                          SunLights)
+from .description import AreaLights, MaterialTable, MeshTable, PointLights, SceneDescription, SunLights
 from .sampling import luminance
 
 

@@ -282,9 +282,9 @@ def test_seed_paths_are_valid_paths_whose_energy_matches_path_tracer_seeds(direc
     """ERCUTS seeding: BDPT seeds are unoccluded target-class paths with f > 0 whose raster
     position is x1's projection, and Σe estimates the same energy as path-traced seeds
     (indirect paths only with direct light by NEE; also x2 on the light with 'VPL')."""
-    from ercuts_core.initialization import seeds_from_path_tracer
-    from ercuts_core.integrators.bdpt import seed_paths
-    from ercuts_core.paths import contribution, edge_visible, is_target
+    from ercuts_core.integrators.ercuts.initialization import seeds_from_path_tracer
+    from ercuts_core.integrators.ercuts.seeding import seed_paths
+    from ercuts_core.integrators.ercuts.paths import contribution, edge_visible, is_target
 
     scene = BuiltScene(sanitize(cornell_box(16, 12, "mesh")).desc)
     settings = RenderSettings(max_depth=5, direct_light=direct_light)

@@ -76,3 +76,21 @@ def test_importance_integrates_to_one_per_pixel():
     est = (con.factor * cos_p) * (2 * half) ** 2
     mean, se = est.mean(), est.std() / np.sqrt(n)
     assert abs(mean - cam.window.n_pixels) < 4 * se, (mean, cam.window.n_pixels, se)
+
+
+def test_window_raster_and_pixel_round_trip():
+    """Window.raster → Window.pixel is the identity on the window; outside positions are
+    flagged (or clamped with clip=True)."""
+    from ercuts_core.camera import Window
+
+    w = Window(3, 5, 7, 4)
+    pix = np.arange(w.n_pixels)
+    raster = w.raster(pix)
+    assert raster[0].tolist() == [3, 5] and raster[-1].tolist() == [9, 8]
+    back, inside = w.pixel(raster + 0.5)
+    assert inside.all() and (back == pix).all()
+    outside = np.array([[2.9, 5.5], [10.0, 5.5], [3.5, 4.9], [3.5, 9.0]])
+    _, inside = w.pixel(outside)
+    assert not inside.any()
+    clipped, inside = w.pixel(outside, clip=True)
+    assert inside.all() and clipped.tolist() == [0, 6, 0, 21]

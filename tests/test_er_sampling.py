@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from scipy.special import gammaincc
 
-from ercuts_core.er_sampling import chain_starts, run_chains
-from ercuts_core.initialization import seeds_from_path_tracer
-from ercuts_core.mutations import BIDIR, MUTATORS, MutationContext
-from ercuts_core.paths import PathBatch, contribution, is_target
+from ercuts_core.integrators.ercuts.er_sampling import chain_starts, run_chains
+from ercuts_core.integrators.ercuts.initialization import seeds_from_path_tracer
+from ercuts_core.integrators.ercuts.mutations import BIDIR, MUTATORS, MutationContext
+from ercuts_core.integrators.ercuts.paths import PathBatch, contribution, is_target
 from ercuts_core.scene import BuiltScene
 from ercuts_core.scenes import cornell_box
 from ercuts_core.validate import sanitize

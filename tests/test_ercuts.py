@@ -8,6 +8,7 @@ import time
 import numpy as np
 import pytest
 
+from benchmarks.metrics import relmse
 from ercuts_core import RenderSettings, render
 from ercuts_core.sampling import luminance
 from ercuts_core.scenes import closed_room, s_corridor
@@ -15,11 +16,6 @@ from ercuts_core.scenes import closed_room, s_corridor
 HERE = os.path.dirname(os.path.abspath(__file__))
 REF = os.path.join(HERE, "data", "closed_room_48x36_path_2048spp.npz")
 FAST = dict(integrator="ERCUTS", samples=8, chain_length=40, chains_per_pixel=0.5)
-
-
-def relmse(img, ref):
-    """mean((x − r)² / (r² + 0.01)) over pixels and channels (style-and-testing.md §2.8)."""
-    return float(np.mean((img - ref) ** 2 / (ref**2 + 1e-2)))
 
 
 @pytest.fixture(scope="module")
@@ -116,7 +112,7 @@ def test_cancel_in_each_phase_returns_an_image(phase):
 
 
 def test_gather_order_is_a_permutation_of_coherent_runs():
-    from ercuts_core.integrators.ercuts import GATHER_RUN, _spread_order
+    from ercuts_core.integrators.ercuts.gather import GATHER_RUN, spread_order as _spread_order
 
     pts = np.flatnonzero(np.random.default_rng(0).random(5000) < 0.7)
     order = _spread_order(pts, seed=3)
@@ -131,7 +127,7 @@ def test_gather_order_is_a_permutation_of_coherent_runs():
 
 
 def test_gather_pace_raises_the_error_then_caps_and_recovers():
-    from ercuts_core.integrators.ercuts import MAX_PACED_ERROR, GatherPace
+    from ercuts_core.integrators.ercuts.pacing import MAX_PACED_ERROR, GatherPace
 
     pace = GatherPace(0.02, 1000)
     pace.update(256, 1.0, 500.0, 10_000, float("inf"))                   # no time limit
@@ -165,23 +161,19 @@ def test_phase_deadlines_follow_the_shares():
     grows with the rough image's direct fraction, shrinking the others."""
     from types import SimpleNamespace
 
-    from ercuts_core.integrators.ercuts import ErcutsIntegrator
-    from ercuts_core.scene import BuiltScene
-    from ercuts_core.validate import sanitize
+    from ercuts_core.integrators.ercuts.pacing import Schedule
 
-    scene = BuiltScene(sanitize(closed_room(8, 6)).desc)
-    try:
-        now = time.perf_counter()
-        clock = SimpleNamespace(deadline=now + 100.0)
-        nee = ErcutsIntegrator(scene, RenderSettings(time_limit=100.0))
-        vpl = ErcutsIntegrator(scene, RenderSettings(time_limit=100.0, direct_light="VPL"))
-        assert vpl._deadline(clock, "bdpt") - now == pytest.approx(15.0, abs=0.05)     # 0.15 / 1
-        assert vpl._deadline(clock, "chains") - now == pytest.approx(100 * 0.30 / 0.85, abs=0.05)
-        assert nee._deadline(clock, "bdpt") - now == pytest.approx(15.0, abs=0.05)
-        assert nee._deadline(clock, "direct") - now == pytest.approx(100 * 0.05 / 0.85, abs=0.05)
-        nee.share["direct"] = 0.5                        # a directly lit scene; the gather keeps 0.35
-        assert nee._deadline(clock, "direct") - now == pytest.approx(100 * 0.5 / 1.30, abs=0.05)
-        assert nee._deadline(clock, "chains") - now == pytest.approx(100 * 0.30 / 0.80, abs=0.05)
-        assert ErcutsIntegrator(scene, RenderSettings())._deadline(SimpleNamespace(deadline=None), "bdpt") is None
-    finally:
-        scene.close()
+    now = time.perf_counter()
+    clock = SimpleNamespace(deadline=now + 100.0)
+    nee = Schedule(clock, direct_vpls=False)
+    vpl = Schedule(clock, direct_vpls=True)
+    assert vpl.deadline("bdpt") - now == pytest.approx(15.0, abs=0.05)     # 0.15 / 1
+    assert vpl.deadline("chains") - now == pytest.approx(100 * 0.30 / 0.85, abs=0.05)
+    assert nee.deadline("bdpt") - now == pytest.approx(15.0, abs=0.05)
+    assert nee.deadline("direct") - now == pytest.approx(100 * 0.05 / 0.85, abs=0.05)
+    nee.share["direct"] = 0.5                        # a directly lit scene; the gather keeps 0.35
+    assert nee.deadline("direct") - now == pytest.approx(100 * 0.5 / 1.30, abs=0.05)
+    assert nee.deadline("chains") - now == pytest.approx(100 * 0.30 / 0.80, abs=0.05)
+    nee.grow_direct(1.0)                             # all direct: 0.05 + 0.45
+    assert nee.share["direct"] == pytest.approx(0.5)
+    assert Schedule(SimpleNamespace(deadline=None), direct_vpls=False).deadline("bdpt") is None

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest, chisquare
 
-from ercuts_core.light_tree import LightTree, build_light_tree, cone_union, luminance
+from ercuts_core.integrators.ercuts.light_tree import LightTree, build_light_tree, cone_union, luminance
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -229,7 +229,7 @@ def test_cone_union_contains_both_cones() -> None:
 def test_keep_going_is_polled_and_can_stop_the_build() -> None:
     """The build polls keep_going between K-NN chunks and levels (fractions rising in
     [0, 1]); a False stops it (None); always True builds the same tree as no callback."""
-    from ercuts_core import light_tree
+    from ercuts_core.integrators.ercuts import light_tree
 
     rng = np.random.default_rng(4)
     n = 3 * light_tree._KNN_CHUNK // 2

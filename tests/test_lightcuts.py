@@ -6,8 +6,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ercuts_core.light_tree import build_light_tree, luminance
-from ercuts_core.lightcuts import (ShadingPoints, brute_force, cluster_bound, cosine_bound,
+from ercuts_core.integrators.ercuts.light_tree import build_light_tree, luminance
+from ercuts_core.integrators.ercuts.lightcuts import (ShadingPoints, brute_force, cluster_bound, cosine_bound,
                                    evaluate_lights, geometry_bound, lightcut)
 
 
@@ -332,7 +332,7 @@ def test_cluster_bound_is_zero_for_leaves() -> None:
 def test_select_band_prefilter_matches_full_sort():
     """_select drops out-of-band candidates before sorting; same entries, same order as
     sorting every candidate (the pre-filter is a speed-up only)."""
-    from ercuts_core.lightcuts import _Entries, _select
+    from ercuts_core.integrators.ercuts.lightcuts import _Entries, _select
 
     def reference(e, err, thr, budget, band):
         cand = np.flatnonzero(err > thr)

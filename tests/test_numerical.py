@@ -10,8 +10,8 @@ from ercuts_core import MaterialTable, MeshTable, PointLights, RenderSettings, r
 from ercuts_core.description import SceneDescription
 from ercuts_core.film import Film
 from ercuts_core.camera import Window
-from ercuts_core.light_tree import build_light_tree
-from ercuts_core.lightcuts import ShadingPoints, brute_force, lightcut
+from ercuts_core.integrators.ercuts.light_tree import build_light_tree
+from ercuts_core.integrators.ercuts.lightcuts import ShadingPoints, brute_force, lightcut
 from ercuts_core.scenes import _camera
 
 

@@ -26,9 +26,9 @@ FAST = dict(integrator="ERCUTS", samples=4, chain_length=20, e1_samples=32)
 
 
 def _driver():
-    """The ``ercuts_core.render`` module (the package re-exports the function under its name)."""
+    """The module of the render clock and its ``PREVIEW_INTERVAL``."""
     import importlib
-    return importlib.import_module("ercuts_core.render")
+    return importlib.import_module("ercuts_core.integrators.base")
 
 
 class Recorder:
@@ -138,8 +138,8 @@ def test_cancel_during_lightcuts_mixes_gathered_and_rough_pixels():
 def test_lightcut_on_round_stops_refinement():
     """lightcut(on_round=...) returning False stops after the first round with a complete,
     coarser estimate at every point."""
-    from ercuts_core.light_tree import build_light_tree
-    from ercuts_core.lightcuts import ShadingPoints, lightcut
+    from ercuts_core.integrators.ercuts.light_tree import build_light_tree
+    from ercuts_core.integrators.ercuts.lightcuts import ShadingPoints, lightcut
 
     rng = np.random.default_rng(0)
     n_vpl, n_pts = 400, 50

@@ -56,13 +56,18 @@ Debugging: ``BDPTIntegrator(..., debug_strategies=True)`` accumulates each strat
 MIS-weighted contribution in ``strategy_images[(s, t)]`` ((n_window_pixels, 3) sums, in
 units where ``sum(strategy_images.values()) / spp`` equals the image RGB).
 
-Seeding (ERCUTS step 1): :func:`seed_paths` traces one BDPT sample per pixel and returns
-every strategy's unoccluded, MIS-weighted connection as an eye-first
-:class:`~ercuts_core.paths.PathBatch` with energy e = Y(w·C) in image units (light-tracing
-rows divided by the number of window pixels, as their splats are), so that Σe estimates
-the image energy (Mitsuba ``PathSampler::samplePaths``).
+Connections (Ercuts' seed paths): ``BDPTIntegrator(..., on_connections=callback)`` calls
+``callback(cam, lig, rows)`` after every batch of lanes with the batch's
+:class:`Subpaths` and a :class:`Connection` per group of unoccluded, MIS-weighted
+contributions (lane, s, t, energy; the light sample for s = 1, the raster position for
+t = 1), so that a caller can rebuild every sampled path
+(:mod:`ercuts_core.integrators.ercuts.seeding` turns them into the chains' seed paths).
+Without a callback nothing is recorded.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -71,11 +76,11 @@ from ..arrays import take_rows
 from ..bsdf import Bsdf
 from ..film import Film, path_class
 from ..lights import AREA, ENV, POINT, SUN, TRI
-from ..paths import PathBatch, is_target
 from ..sampling import luminance
 from ..scene import BuiltScene
 from ..settings import RenderSettings
-from .base import Integrator, dot
+from ..vecmath import dot
+from .base import Integrator
 
 #: Upper bound of one density ratio and of the running ratio products in MIS.
 _RATIO_MAX = 1e30
@@ -100,19 +105,55 @@ def _adjoint_correction(ns: NDArray, ng: NDArray, wo: NDArray, wi: NDArray) -> N
     return out
 
 
-class _VertexRows:
+#: Columns of a vertex's float attributes in :attr:`Subpaths.data` and :attr:`VertexRows.data`.
+_COLUMNS = {"p": slice(0, 3), "ng": slice(3, 6), "ns": slice(6, 9), "wo": slice(9, 12),
+            "beta": slice(12, 15), "g_prev": 15}
+_WIDTH = 16
+
+
+def _column_views(obj, data: NDArray) -> None:
+    """Set ``obj.p``, ``obj.ng``, … (:data:`_COLUMNS`) to views of ``data``'s last axis."""
+    for name, col in _COLUMNS.items():
+        setattr(obj, name, data[..., col])
+
+
+@dataclass
+class LightSample:
+    """The light vertex of s = 1 connections: (R, 3) position (a direction for infinite
+    lights), (R, 3) normal (0 off surfaces) and (R,) global light index."""
+
+    p: NDArray
+    n: NDArray
+    light: NDArray
+
+
+@dataclass
+class Connection:
+    """A group of R sampled paths (unoccluded, MIS-weighted contribution w·C ≠ 0) of one
+    batch: lane, s and t (R,) each; ``e`` (R,) Y(w·C) in image units (t = 1 rows divided by
+    the number of window pixels, as their splats are, so Σe estimates the image energy);
+    ``light_sample`` for s = 1 rows, ``raster`` (R, 2) for t = 1 rows."""
+
+    lane: NDArray
+    s: NDArray
+    t: NDArray
+    e: NDArray
+    light_sample: LightSample | None = None
+    raster: NDArray | None = None
+
+
+class VertexRows:
     """Attributes of one vertex per connection row, gathered in one go (views of ``data``)."""
 
     def __init__(self, data: NDArray):
         self.data = data
-        self.p, self.ng, self.ns = data[:, 0:3], data[:, 3:6], data[:, 6:9]
-        self.wo, self.beta, self.g_prev = data[:, 9:12], data[:, 12:15], data[:, 15]
+        _column_views(self, data)
 
-    def take(self, idx: NDArray) -> "_VertexRows":
-        return _VertexRows(take_rows(self.data, idx))
+    def take(self, idx: NDArray) -> "VertexRows":
+        return VertexRows(take_rows(self.data, idx))
 
 
-class _Subpaths:
+class Subpaths:
     """Vertices of N subpaths, vertex-major structure of arrays (index [vertex, lane]).
 
     The float attributes of a vertex live side by side in ``data`` (V, N, 16), so that
@@ -137,10 +178,8 @@ class _Subpaths:
     def __init__(self, n_vertices: int, n_lanes: int):
         V, N = n_vertices, n_lanes
         self.n_lanes = N
-        self.data = np.zeros((V, N, 16))
-        self.p, self.ng, self.ns = self.data[..., 0:3], self.data[..., 3:6], self.data[..., 6:9]
-        self.wo, self.beta = self.data[..., 9:12], self.data[..., 12:15]
-        self.g_prev = self.data[..., 15]
+        self.data = np.zeros((V, N, _WIDTH))
+        _column_views(self, self.data)
         self.mat = np.zeros((V, N), np.int64)
         self.prim = np.full((V, N), -1, np.int64)
         self.pdf_fwd = np.zeros((V, N))
@@ -153,9 +192,9 @@ class _Subpaths:
         self.light = np.zeros(N, np.int64)
         self.kind0 = np.zeros(N, np.int64)
 
-    def rows(self, k: NDArray, lane: NDArray) -> _VertexRows:
+    def rows(self, k: NDArray, lane: NDArray) -> VertexRows:
         """The float attributes of vertex k[r] of lane[r] for connection rows r."""
-        return _VertexRows(take_rows(self.data.reshape(-1, 16), k * self.n_lanes + lane))
+        return VertexRows(take_rows(self.data.reshape(-1, _WIDTH), k * self.n_lanes + lane))
 
     def at(self, name: str, k: NDArray, lane: NDArray) -> NDArray:
         """Gather the (V, N) attribute ``name`` (pdf_fwd, pdf_rev, mat, prim, env) for rows."""
@@ -195,11 +234,14 @@ class BDPTIntegrator(Integrator):
         mis_power: MIS heuristic exponent β (2 = power heuristic, 1 = balance heuristic).
         max_lanes: camera samples traced together (bounds the memory of the subpath arrays).
         max_rows: connection rows evaluated together (bounds the memory of a group).
+        on_connections: ``callback(cam, lig, rows)`` after every batch of lanes (module
+            docstring, :class:`Connection`); None records nothing.
     """
 
     def __init__(self, scene: BuiltScene, settings: RenderSettings, *,
                  debug_strategies: bool = False, mis_power: float = 2.0,
-                 max_lanes: int = 1 << 15, max_rows: int = 1 << 17):
+                 max_lanes: int = 1 << 15, max_rows: int = 1 << 17,
+                 on_connections: "Callable[[Subpaths, Subpaths, list[Connection]], None] | None" = None):
         super().__init__(scene, settings)
         lights = scene.lights
         self.mis_power = float(mis_power)
@@ -217,7 +259,7 @@ class BDPTIntegrator(Integrator):
         self.n_light = depth if self.camera.is_delta_direction else depth + 1
         self.env_pdf = float(lights.pdf_illuminate_env(1)[0])        # pmf(env)/(4π)
         self.inv_disk = 1.0 / (np.pi * lights.radius**2)             # infinite-light disk
-        self._seed_rows: list[dict] | None = None                    # set while seeding
+        self.on_connections = on_connections
 
     # ================================================================== driver
     def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator) -> None:
@@ -226,7 +268,7 @@ class BDPTIntegrator(Integrator):
 
     def _render_lanes(self, film: Film, pix: NDArray, rng: np.random.Generator) -> None:
         n = len(pix)
-        self._pending: list[dict] = []                               # seed rows of this batch
+        self._pending: list[Connection] = []                         # rows for on_connections
         # Trace the camera and light subpaths
         cam, alpha = self._camera_subpaths(film, pix, rng)
         lig, no_s0 = self._light_subpaths(n, rng)
@@ -245,18 +287,18 @@ class BDPTIntegrator(Integrator):
                 for lane, s, t in self._rows_t1(lig).chunks(self.max_rows):
                     self._connect_camera(film, lig, no_s0, lane, s, t)
         film.add_samples(pix, L.sum(axis=0), alpha, parts=L)
-        if self._seed_rows is not None:
-            self._seed_rows.append(self._seed_batch(cam, lig))
+        if self.on_connections is not None:
+            self.on_connections(cam, lig, self._pending)
 
     def _accumulate(self, L: NDArray, pix: NDArray, lane: NDArray, s: NDArray, t: NDArray,
-                    keep: NDArray, c: NDArray, light_sample: dict | None = None) -> None:
+                    keep: NDArray, c: NDArray, light_sample: LightSample | None = None) -> None:
         """L[class, lane[keep]] += c, class = path_class(s + t − 2) (scattering vertices); rows
         of one lane may repeat across strategies."""
         lane, s, t = lane[keep], s[keep], t[keep]
         if len(lane) == 0:
             return
-        if self._seed_rows is not None:
-            self._pending.append(dict(lane=lane, s=s, t=t, e=luminance(c), sample=light_sample))
+        if self.on_connections is not None:
+            self._pending.append(Connection(lane, s, t, luminance(c), light_sample=light_sample))
         cell = path_class(s + t - 2) * L.shape[1] + lane
         flat = L.reshape(-1, 3)
         for ch in range(3):
@@ -279,10 +321,10 @@ class BDPTIntegrator(Integrator):
     def _camera_subpaths(self, film: Film, pix: NDArray, rng: np.random.Generator):
         """Camera subpaths for window pixels ``pix``; records alpha and first-hit AOVs."""
         n = len(pix)
-        cam = _Subpaths(self.n_cam, n)
+        cam = Subpaths(self.n_cam, n)
         # As Integrator.camera_rays (same random numbers), keeping the raster positions
         w = self.window
-        cam.raster = np.stack([w.x0 + pix % w.width, w.y0 + pix // w.width], axis=1).astype(np.float64)
+        cam.raster = w.raster(pix).astype(np.float64)
         cam.raster += rng.random((n, 2))
         o, d = self.camera.generate_rays(cam.raster)
         cam.p[0] = o
@@ -299,7 +341,7 @@ class BDPTIntegrator(Integrator):
             (delta or AREA), so the s = 0 strategy does not exist for it.
         """
         lights, tracer = self.scene.lights, self.scene.tracer
-        lig = _Subpaths(self.n_light, n)
+        lig = Subpaths(self.n_light, n)
         e = lights.emit(rng.random(n), rng.random((n, 2)), rng.random((n, 2)))
         no_s0 = (e.kind == POINT) | (e.kind == SUN) | (e.kind == AREA)
         lig.light, lig.kind0 = e.light, e.kind
@@ -320,7 +362,7 @@ class BDPTIntegrator(Integrator):
                               importance=True)
         return lig, no_s0
 
-    def _random_walk(self, path: _Subpaths, lanes: NDArray, o: NDArray, d: NDArray,
+    def _random_walk(self, path: Subpaths, lanes: NDArray, o: NDArray, d: NDArray,
                      beta: NDArray, pdf_dir: NDArray, rng: np.random.Generator,
                      importance: bool, film: Film | None = None, pix: NDArray | None = None):
         """Extend subpaths ``lanes`` from vertex 1 along rays (o, d) (pbrt-v3 RandomWalk).
@@ -380,8 +422,8 @@ class BDPTIntegrator(Integrator):
                 fwd = pdf_dir * cos_here / d2
                 g_prev = np.abs(dot(path.ng[k - 1, lanes], d)) / d2
             row = path.data[k]
-            row[lanes, 0:3], row[lanes, 3:6], row[lanes, 6:9] = p, ng, ns
-            row[lanes, 9:12], row[lanes, 12:15], row[lanes, 15] = wo, beta, g_prev
+            for name, value in zip(_COLUMNS, (p, ng, ns, wo, beta, g_prev)):
+                row[lanes, _COLUMNS[name]] = value
             path.mat[k, lanes], path.prim[k, lanes] = surf.mat, surf.prim
             path.pdf_fwd[k, lanes] = fwd
             path.count[lanes] = k + 1
@@ -434,7 +476,7 @@ class BDPTIntegrator(Integrator):
             total += np.where(use[m], term, 0.0)
         return total
 
-    def _mis_weight(self, cam: _Subpaths, lig: _Subpaths | None, lane: NDArray, s: NDArray,
+    def _mis_weight(self, cam: Subpaths, lig: Subpaths | None, lane: NDArray, s: NDArray,
                     t: NDArray, pt_rev: NDArray, ptm_rev: NDArray, qs_rev: NDArray | None = None,
                     qsm_rev: NDArray | None = None, qs_fwd: NDArray | None = None,
                     no_s0: NDArray | None = None) -> NDArray:
@@ -481,7 +523,7 @@ class BDPTIntegrator(Integrator):
         return np.where(s + t == 2, 1.0, 1.0 / (1.0 + total))
 
     # ================================================================== connection rows
-    def _rows_s0(self, cam: _Subpaths) -> _Rows:
+    def _rows_s0(self, cam: Subpaths) -> _Rows:
         """s = 0: camera vertices on emissive triangles or escaped to the environment."""
         # Per-triangle light index, with a −1 sentinel for "no triangle" (prim = −1)
         tri_light = np.append(self.scene.lights.tri_light, -1)
@@ -494,12 +536,12 @@ class BDPTIntegrator(Integrator):
             parts.append((0, t, np.flatnonzero(emitter)))
         return _Rows(parts)
 
-    def _rows_s1(self, cam: _Subpaths) -> _Rows:
+    def _rows_s1(self, cam: Subpaths) -> _Rows:
         """s = 1: every surface vertex of the camera subpaths up to depth max_depth."""
         last = min(self.n_cam, self.settings.max_depth + 1)
         return _Rows([(1, t, np.flatnonzero(cam.surface(t - 1))) for t in range(2, last + 1)])
 
-    def _rows_general(self, cam: _Subpaths, lig: _Subpaths) -> _Rows:
+    def _rows_general(self, cam: Subpaths, lig: Subpaths) -> _Rows:
         """s, t ≥ 2 with s + t − 2 ≤ max_depth."""
         parts = []
         for t in range(2, self.n_cam + 1):
@@ -508,13 +550,13 @@ class BDPTIntegrator(Integrator):
                 parts.append((s, t, np.flatnonzero(on_cam & (lig.count > s - 1))))
         return _Rows(parts)
 
-    def _rows_t1(self, lig: _Subpaths) -> _Rows:
+    def _rows_t1(self, lig: Subpaths) -> _Rows:
         """t = 1: light vertices 1 … max_depth."""
         last = min(self.n_light, self.settings.max_depth + 1)
         return _Rows([(s, 1, np.flatnonzero(lig.count > s - 1)) for s in range(2, last + 1)])
 
     # ================================================================== strategies
-    def _hit_emitter(self, cam: _Subpaths, lane: NDArray, s: NDArray, t: NDArray):
+    def _hit_emitter(self, cam: Subpaths, lane: NDArray, s: NDArray, t: NDArray):
         """s = 0: camera vertex t−1 is on an emitter. Returns (kept rows, contributions)."""
         lights = self.scene.lights
         k = t - 1
@@ -537,7 +579,7 @@ class BDPTIntegrator(Integrator):
         w = self._mis_weight(cam, None, lane, s, t, pt_rev, ptm_rev)
         return keep, c * w[:, None]
 
-    def _connect_light(self, cam: _Subpaths, lane: NDArray, s: NDArray, t: NDArray,
+    def _connect_light(self, cam: Subpaths, lane: NDArray, s: NDArray, t: NDArray,
                        rng: np.random.Generator):
         """s = 1: next-event estimation from camera vertex t−1 with a new light sample."""
         lights = self.scene.lights
@@ -575,9 +617,9 @@ class BDPTIntegrator(Integrator):
                              qs_fwd=qs_fwd, no_s0=no_s0)
         vis = self._light_visible(p, ng, wi, lp, n_l, infinite, on_surf)
         sample = None
-        if self._seed_rows is not None:                      # the light vertex of each seed
-            sample = dict(p=np.where(infinite[:, None], wi, lp)[vis],
-                          n=np.where(on_surf[:, None], n_l, 0.0)[vis], light=ls.light[idx][vis])
+        if self.on_connections is not None:                  # the light vertex of each path
+            sample = LightSample(np.where(infinite[:, None], wi, lp)[vis],
+                                 np.where(on_surf[:, None], n_l, 0.0)[vis], ls.light[idx][vis])
         return idx[vis], (c * w[:, None])[vis], sample
 
     def _light_visible(self, p, ng, wi, lp, n_l, infinite, on_surf) -> NDArray:
@@ -592,7 +634,7 @@ class BDPTIntegrator(Integrator):
             vis[b] = tracer.visible(p[b], ng[b], target[b], None)
         return vis
 
-    def _connect_vertices(self, cam: _Subpaths, lig: _Subpaths, no_s0: NDArray, lane: NDArray,
+    def _connect_vertices(self, cam: Subpaths, lig: Subpaths, no_s0: NDArray, lane: NDArray,
                           s: NDArray, t: NDArray):
         """s, t ≥ 2: connect light vertex s−1 to camera vertex t−1."""
         qs, pt = lig.rows(s - 1, lane), cam.rows(t - 1, lane)
@@ -631,7 +673,7 @@ class BDPTIntegrator(Integrator):
         vis = self.scene.tracer.visible(qp, qng, pp, png)
         return idx[vis], (c * wgt[:, None])[vis]
 
-    def _connect_camera(self, film: Film, lig: _Subpaths, no_s0: NDArray, lane: NDArray,
+    def _connect_camera(self, film: Film, lig: Subpaths, no_s0: NDArray, lane: NDArray,
                         s: NDArray, t: NDArray) -> None:
         """t = 1: connect light vertex s−1 to the camera and splat (light tracing)."""
         camera = self.camera
@@ -666,104 +708,10 @@ class BDPTIntegrator(Integrator):
         vis = self.scene.tracer.visible(p, ng, np.broadcast_to(camera.position, p.shape), None)
         raster, c, s, t = raster[vis], (c * w[:, None])[vis], s[vis], t[vis]
         film.add_splats(raster, c, path_class(s + t - 2))
-        if self._seed_rows is not None:
-            self._pending.append(dict(lane=lane[vis], s=s, t=t, raster=raster,
-                                      e=luminance(c) / self.window.n_pixels))
+        if self.on_connections is not None:
+            self._pending.append(Connection(lane[vis], s, t, luminance(c) / self.window.n_pixels,
+                                            raster=raster))
         if self.strategy_images is not None and len(c):
             win = self.window
-            ix = np.floor(raster[:, 0]).astype(np.int64) - win.x0
-            iy = np.floor(raster[:, 1]).astype(np.int64) - win.y0
-            ok = (ix >= 0) & (ix < win.width) & (iy >= 0) & (iy < win.height)
-            self._record_strategies(s[ok], t[ok], (iy * win.width + ix)[ok], c[ok] / win.n_pixels)
-
-    # ================================================================== seeding
-    def seed_paths(self, rng: np.random.Generator, pix: NDArray | None = None
-                   ) -> tuple[PathBatch, NDArray]:
-        """One BDPT sample for each window pixel in ``pix`` (default: all); see :func:`seed_paths`."""
-        pix = np.arange(self.window.n_pixels) if pix is None else np.asarray(pix)
-        self._seed_rows = []
-        try:
-            for start in range(0, len(pix), self.max_lanes):
-                self._render_lanes(Film(self.window), pix[start:start + self.max_lanes], rng)
-            parts = [b for b in self._seed_rows if len(b[0])]
-        finally:
-            self._seed_rows = None
-        if not parts:
-            return PathBatch.empty(0, self.settings.max_depth + 2), np.zeros(0)
-        paths = PathBatch.concat([b[0] for b in parts])
-        e = np.concatenate([b[1] for b in parts])
-        keep = is_target(self.scene, paths, self.settings.direct_vpls) & (e > 0)
-        return paths.take(keep), e[keep]
-
-    def _seed_batch(self, cam: _Subpaths, lig: _Subpaths) -> tuple[PathBatch, NDArray]:
-        """The connection rows recorded during one batch as eye-first paths x0 … x_k."""
-        lights = self.scene.lights
-        K = self.settings.max_depth + 2
-        out = []
-        for rec in self._pending:
-            lane, s, t = rec["lane"], rec["s"], rec["t"]
-            R = len(lane)
-            if R == 0:          # a strategy with no rows in this batch (seen at max_depth <= 4)
-                continue
-            P = PathBatch.empty(R, K)
-            rows = np.arange(R)
-            # Camera vertices x0 … x_{t−1}
-            for j in range(int(t.max())):
-                r = np.flatnonzero(t > j)
-                self._put_vertex(P, r, np.full(len(r), j), cam, np.full(len(r), j), lane[r])
-            # Light surface vertices x_t … x_{t+s−2} = y_{s−1} … y_1
-            for i in range(int(s.max()) - 1):
-                r = np.flatnonzero(s - 1 - i >= 1)
-                self._put_vertex(P, r, t[r] + i, lig, s[r] - 1 - i, lane[r])
-            # The light vertex x_k
-            if "sample" in rec and rec["sample"] is not None:      # s = 1: the light sample
-                k, p_l, n_l, light = t, rec["sample"]["p"], rec["sample"]["n"], rec["sample"]["light"]
-            elif (s == 0).all():                                   # s = 0: the emitter hit
-                k = t - 1
-                env = cam.at("env", k, lane)
-                vr = cam.rows(k, lane)
-                p_l = np.where(env[:, None], -vr.wo, vr.p)
-                n_l = np.where(env[:, None], 0.0, vr.ng)
-                light = np.full(R, max(lights.env_light, 0))
-                light[~env] = lights.tri_light[cam.at("prim", k, lane)[~env]]
-            else:                                                  # s ≥ 2: y_0
-                k = t + s - 1
-                kind = lig.kind0[lane]
-                infinite = (kind == SUN) | (kind == ENV)
-                on_surf = (kind == AREA) | (kind == TRI)
-                p_l = np.where(infinite[:, None], lig.wo[1, lane], lig.p[0, lane])
-                n_l = np.where(on_surf[:, None], lig.ng[0, lane], 0.0)
-                light = lig.light[lane]
-            P.p[rows, k], P.ng[rows, k], P.ns[rows, k] = p_l, n_l, n_l
-            P.mat[rows, k] = 0
-            P.k[:], P.light[:] = k, light
-            P.raster[:] = rec["raster"] if "raster" in rec else cam.raster[lane]
-            out.append((P, rec["e"]))
-        if not out:
-            return PathBatch.empty(0, K), np.zeros(0)
-        return PathBatch.concat([o[0] for o in out]), np.concatenate([o[1] for o in out])
-
-    @staticmethod
-    def _put_vertex(P: PathBatch, r: NDArray, slot: NDArray, path: _Subpaths, k: NDArray,
-                    lane: NDArray) -> None:
-        vr = path.rows(k, lane)
-        P.p[r, slot], P.ng[r, slot], P.ns[r, slot] = vr.p, vr.ng, vr.ns
-        P.mat[r, slot] = path.at("mat", k, lane)
-
-
-def seed_paths(scene: BuiltScene, settings: RenderSettings, rng: np.random.Generator,
-               pix: NDArray | None = None) -> tuple[PathBatch, NDArray]:
-    """Seed paths for the ER chains from one fresh BDPT sample per pixel.
-
-    Every connection strategy with a non-zero, unoccluded MIS-weighted contribution w·C
-    becomes one eye-first path (:mod:`ercuts_core.paths` conventions) with energy
-    e = Y(w·C) in image units: camera-sample rows count toward their pixel, light-tracing
-    (t = 1) rows are divided by the number of window pixels like their splats, so Σe is an
-    unbiased estimate of the image energy Σ_pixels Y. Only target-class paths (x2 on a
-    surface, :func:`~ercuts_core.paths.is_target`; x2 scattering unless
-    ``settings.direct_light`` is 'VPL') with e > 0 are returned.
-
-    Returns:
-        (S paths with ``settings.max_depth + 2`` slots, (S,) energies).
-    """
-    return BDPTIntegrator(scene, settings).seed_paths(rng, pix)
+            pix, ok = win.pixel(raster)
+            self._record_strategies(s[ok], t[ok], pix[ok], c[ok] / win.n_pixels)

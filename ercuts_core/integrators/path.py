@@ -21,7 +21,9 @@ from numpy.typing import NDArray
 from ..bsdf import Bsdf
 from ..film import Film
 from ..lights import AREA, POINT, SUN
-from .base import Integrator, dot, power_heuristic
+from ..sampling import power_heuristic
+from ..vecmath import dot
+from .base import Integrator
 
 
 class PathIntegrator(Integrator):

@@ -134,7 +134,7 @@ def test_background_prints_one_line_per_phase(tmp_path, capsys):
              if line.startswith("Ercuts: ViewLayer | ")]
     phases = [line.split(" | ")[1] for line in lines]
     assert len(phases) == len(set(phases)) >= 3, lines  # one line per phase, several phases
-    assert phases[0] == "BDPT" and set(phases) <= set(engine_module.PHASES)
+    assert phases[0] == "BDPT" and set(phases) <= set(engine_module.phases())
     fractions = [float(line.split(" | ")[2].rstrip("%")) for line in lines]
     assert fractions == sorted(fractions)
 

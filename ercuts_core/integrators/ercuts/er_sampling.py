@@ -20,9 +20,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from ...sampling import luminance
+from ...vecmath import dot
 from .mutations import MUTATORS, NAMES, MutationContext, applicable
 from .paths import PathBatch, contribution, is_target
-from .sampling import luminance
 
 
 @dataclass
@@ -93,7 +94,7 @@ class _VPLStore:
         ids = np.arange(self.n, self.n + m)
         x1, x2 = paths.p[:, 1], paths.p[:, 2]
         n = paths.ns[:, 2]
-        flip = np.einsum("ij,ij->i", n, x1 - x2) < 0
+        flip = dot(n, x1 - x2) < 0
         self.position[ids] = x2
         self.normal[ids] = np.where(flip[:, None], -n, n)
         self.home[ids] = paths.raster
@@ -201,6 +202,4 @@ def _relative(c: NDArray) -> NDArray:
 
 
 def _pixel(window, raster: NDArray) -> NDArray:
-    ix = np.clip(np.floor(raster[:, 0]).astype(np.int64) - window.x0, 0, window.width - 1)
-    iy = np.clip(np.floor(raster[:, 1]).astype(np.int64) - window.y0, 0, window.height - 1)
-    return iy * window.width + ix
+    return window.pixel(raster, clip=True)[0]

@@ -20,12 +20,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .arrays import take_rows
-from .bsdf import Bsdf, bsdf_max_value
-from .camera import Window
+from ...arrays import take_rows
+from ...bsdf import Bsdf, bsdf_max_value
+from ...camera import Window
+from ...sampling import luminance
+from ...scene import BuiltScene, Surface
+from ...vecmath import dot
 from .er_sampling import ChainResult
-from .sampling import luminance
-from .scene import BuiltScene, Surface
 
 
 @dataclass
@@ -55,12 +56,12 @@ def build_gbuffer(scene: BuiltScene, samples: int, rng: np.random.Generator) -> 
     """Trace ``samples`` jittered camera rays per window pixel; returns the G-buffer and rays' d."""
     w = scene.camera.window
     pix = np.repeat(np.arange(w.n_pixels), samples)
-    raster = np.stack([w.x0 + pix % w.width, w.y0 + pix // w.width], axis=1).astype(np.float64)
+    raster = w.raster(pix).astype(np.float64)
     raster += rng.random((len(pix), 2)) if samples > 1 else 0.5
     o, d = scene.camera.generate_rays(raster)
     surf = scene.intersect(o, d)
     wo = -d
-    flip = np.einsum("ij,ij->i", surf.ng, wo) < 0
+    flip = dot(surf.ng, wo) < 0
     sign = np.where(flip, -1.0, 1.0)[:, None]
     return GBuffer(pix, surf.p, surf.ng * sign, surf.ns * sign, wo, surf.mat, surf.valid, surf, samples), d
 
@@ -81,13 +82,13 @@ def vpl_radiance(scene: BuiltScene, g: GBuffer, pts: NDArray, pos: NDArray, norm
     """
     x = g.p[pts]
     d = pos - x
-    dist2 = np.einsum("ij,ij->i", d, d)
+    dist2 = dot(d, d)
     wi = d / np.sqrt(np.maximum(dist2, 1e-300))[:, None]
-    cos_v = np.maximum(-np.einsum("ij,ij->i", normal, wi), 0.0)
+    cos_v = np.maximum(-dot(normal, wi), 0.0)
     geo = cos_v / np.maximum(dist2, 1e-300)
     geo_c = np.minimum(geo, gmax)
     bsdf = Bsdf.from_table(scene.materials, g.mat[pts], g.ns[pts], g.ng[pts])
-    m = bsdf.eval(g.wo[pts], wi) * np.abs(np.einsum("ij,ij->i", g.ns[pts], wi))[:, None]
+    m = bsdf.eval(g.wo[pts], wi) * np.abs(dot(g.ns[pts], wi))[:, None]
     L = m * (geo_c[:, None] * intensity)
     test = g.valid[pts] & (L.max(axis=1) > 0)
     vis = np.zeros(len(pts), bool)
@@ -140,8 +141,7 @@ def estimate_e1(scene: BuiltScene, g: GBuffer, window: Window, pos: NDArray, nor
     V = len(pos)
     npix = window.n_pixels
     S = g.samples
-    hx = np.clip(np.floor(home[:, 0]).astype(np.int64) - window.x0, 0, window.width - 1)
-    hy = np.clip(np.floor(home[:, 1]).astype(np.int64) - window.y0, 0, window.height - 1)
+    hx, hy = window.pixel_xy(home, clip=True)
     x0, x1 = np.maximum(hx - radius, 0), np.minimum(hx + radius, window.width - 1)
     y0, y1 = np.maximum(hy - radius, 0), np.minimum(hy + radius, window.height - 1)
     nb_size = (x1 - x0 + 1) * (y1 - y0 + 1)
@@ -176,7 +176,7 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
     sampling pixels, whose samples near the VPL carry the 1/d² peak.
     ``keep_going(fraction) -> bool`` is called after each chunk; False stops (the rest stay 0).
     """
-    from .sampling import coordinate_system, sample_cosine_hemisphere, to_world
+    from ...sampling import coordinate_system, sample_cosine_hemisphere, to_world
     cam = scene.camera
     V = len(pos)
     total = np.zeros(V)
@@ -198,15 +198,15 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
                 k = np.flatnonzero(ok)
                 yk = y.subset(k)
                 wcam = con.wi[k]
-                flip = np.einsum("ij,ij->i", yk.ng, wcam) < 0
+                flip = dot(yk.ng, wcam) < 0
                 sg = np.where(flip, -1.0, 1.0)[:, None]
                 ng, ns = yk.ng * sg, yk.ns * sg
                 win = -w[h[k]]
                 bsdf = Bsdf.from_table(scene.materials, yk.mat, ns, ng)
                 fr = luminance(bsdf.eval(wcam, win) * color[vv[h[k]]])
-                cos_g_in = np.abs(np.einsum("ij,ij->i", ng, win))
-                ratio = np.abs(np.einsum("ij,ij->i", ns, win)) / np.maximum(cos_g_in, 1e-12)
-                cos_cam = np.abs(np.einsum("ij,ij->i", ng, wcam))
+                cos_g_in = np.abs(dot(ng, win))
+                ratio = np.abs(dot(ns, win)) / np.maximum(cos_g_in, 1e-12)
+                cos_cam = np.abs(dot(ng, wcam))
                 d2 = yk.t**2
                 cos_v = local[h[k], 2]
                 clamp = np.minimum(1.0, gmax * d2 / np.maximum(cos_v, 1e-300))
@@ -247,10 +247,8 @@ def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gm
     fallback = np.zeros((window.n_pixels, 3))
     fallback_emitter = np.zeros((window.n_pixels, 3))
     if (~lit).any():
-        hx = np.clip(np.floor(home[~lit, 0]).astype(np.int64) - window.x0, 0, window.width - 1)
-        hy = np.clip(np.floor(home[~lit, 1]).astype(np.int64) - window.y0, 0, window.height - 1)
+        pix, _ = window.pixel(home[~lit], clip=True)
         val = (count[~lit] * e_d)[:, None] * color[~lit]
-        pix = hy * window.width + hx
         for c in range(3):
             fallback[:, c] = np.bincount(pix, weights=val[:, c], minlength=window.n_pixels)
             fallback_emitter[:, c] = np.bincount(pix, weights=val[:, c] * emitter[~lit],

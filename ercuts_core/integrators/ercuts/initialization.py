@@ -19,12 +19,12 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .bsdf import Bsdf
-from .integrators.base import power_heuristic
-from .lights import AREA, ENV, POINT, SUN, TRI
+from ...bsdf import Bsdf
+from ...lights import AREA, ENV, POINT, SUN, TRI
+from ...sampling import luminance, power_heuristic
+from ...scene import BuiltScene
+from ...vecmath import dot
 from .paths import PathBatch, is_target
-from .sampling import luminance
-from .scene import BuiltScene
 
 
 def rough_image_energy(image: NDArray) -> float:
@@ -50,7 +50,7 @@ def seeds_from_path_tracer(scene: BuiltScene, max_depth: int, rng: np.random.Gen
     w = cam.window
     pix = np.arange(w.n_pixels) if pix is None else pix
     n, K = len(pix), max_depth + 2
-    raster = np.stack([w.x0 + pix % w.width, w.y0 + pix // w.width], axis=1) + rng.random((n, 2))
+    raster = w.raster(pix) + rng.random((n, 2))
     o, d = cam.generate_rays(raster)
     base = PathBatch.empty(n, K)
     base.raster[:] = raster
@@ -93,7 +93,7 @@ def _nee_seeds(scene, base, lanes, surf, wo, bsdf, beta, depth, rng, out_paths, 
     ls = lights.illuminate(surf.p, rng.random(n), rng.random((n, 2)))
     kind = lights.kind[ls.light]
     f, pdf_bsdf = bsdf.eval_pdf(wo, ls.wi)
-    f = f * np.abs(np.einsum("ij,ij->i", surf.ns, ls.wi))[:, None]
+    f = f * np.abs(dot(surf.ns, ls.wi))[:, None]
     nee_only = (kind == POINT) | (kind == SUN) | (kind == AREA)
     w = np.where(nee_only, 1.0, power_heuristic(ls.pdf_w, pdf_bsdf))
     C = beta * f * ls.Li / np.where(ls.valid, ls.pdf_w, 1.0)[:, None] * w[:, None]

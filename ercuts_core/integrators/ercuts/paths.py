@@ -26,14 +26,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .arrays import take_rows
-from .bsdf import Bsdf
-from .lights import AREA, ENV, POINT, SUN, TRI
-from .scene import BuiltScene
-
-
-def _dot(a, b):
-    return np.einsum("ij,ij->i", a, b)
+from ...arrays import take_rows
+from ...bsdf import Bsdf
+from ...lights import AREA, ENV, POINT, SUN, TRI
+from ...scene import BuiltScene
+from ...vecmath import dot
 
 
 @dataclass
@@ -147,19 +144,19 @@ def contribution(scene: BuiltScene, paths: PathBatch, infinite_dir: NDArray | No
         r = rows[act]
         xi, ngi, nsi, mi = (slot_rows(a, r, i) for a in (paths.p, paths.ng, paths.ns, paths.mat))
         wo = slot_rows(paths.p, r, i - 1) - xi
-        wo /= np.maximum(np.sqrt(_dot(wo, wo)), 1e-300)[:, None]
+        wo /= np.maximum(np.sqrt(dot(wo, wo)), 1e-300)[:, None]
         last_edge = (i + 1) == paths.k[r]
         nxt = slot_rows(paths.p, r, i + 1)
         inf_edge = last_edge & infinite[r]
         d = np.where(inf_edge[:, None], nxt, nxt - xi)
-        dist = np.sqrt(_dot(d, d))
+        dist = np.sqrt(dot(d, d))
         wi = d / np.maximum(dist, 1e-300)[:, None]
         bsdf = Bsdf.from_table(scene.materials, mi, nsi, ngi)
-        fr = bsdf.eval(wo, wi) * np.abs(_dot(nsi, wi))[:, None]
+        fr = bsdf.eval(wo, wi) * np.abs(dot(nsi, wi))[:, None]
         # Conversion at the next vertex: area (surfaces), 1/d² (point), 1 (infinite).
         k_next = kind[r]
         surf_next = ~last_edge | (k_next == AREA) | (k_next == TRI)
-        conv = np.where(surf_next, np.abs(_dot(slot_rows(paths.ng, r, i + 1), wi)) / np.maximum(dist * dist, 1e-300),
+        conv = np.where(surf_next, np.abs(dot(slot_rows(paths.ng, r, i + 1), wi)) / np.maximum(dist * dist, 1e-300),
                         np.where(inf_edge, 1.0, 1.0 / np.maximum(dist * dist, 1e-300)))
         term = fr * conv[:, None]
         f[r] *= term
@@ -184,7 +181,7 @@ def _emitted(scene: BuiltScene, paths: PathBatch, rows: NDArray, w_out: NDArray)
     out = np.zeros((len(rows), 3))
     m = kind == AREA
     if m.any():
-        facing = _dot(lights.ar_n[loc[m]], w_out[m]) > 0
+        facing = dot(lights.ar_n[loc[m]], w_out[m]) > 0
         out[m] = lights.ar_L[loc[m]] * facing[:, None]
     m = kind == TRI
     if m.any():

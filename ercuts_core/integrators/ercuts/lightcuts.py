@@ -41,7 +41,8 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from .arrays import take_rows
+from ...arrays import take_rows
+from ...vecmath import dot
 from .light_tree import LightTree, luminance
 
 #: Pair budget of one brute-force block (memory ≈ 200 B per pair).
@@ -120,9 +121,6 @@ class LightcutResult:
 
 # ------------------------------------------------------------------------------ bounds
 
-
-def _dot(a: NDArray, b: NDArray) -> NDArray:
-    return np.einsum("ij,ij->i", a, b)
 
 
 def _frame(n: NDArray) -> tuple[NDArray, NDArray]:
@@ -234,8 +232,8 @@ def evaluate_lights(pts: ShadingPoints, pidx: NDArray, vidx: NDArray, vpl_pos: N
     d = q - x
     d2 = np.maximum(_rowsum3(d * d), _D2_MIN)
     wi = d / np.sqrt(d2)[:, None]
-    cos_l = np.maximum(0.0, -_dot(qn, wi))
-    cos_x = _dot(pts.n[pidx], wi)
+    cos_l = np.maximum(0.0, -dot(qn, wi))
+    cos_x = dot(pts.n[pidx], wi)
     if pts.transmissive is not None:
         cos_x = np.where(np.asarray(pts.transmissive, bool)[pidx], np.abs(cos_x), cos_x)
     cos_x = np.maximum(cos_x, 0.0)

@@ -29,19 +29,17 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .bsdf import Bsdf
-from .lights import AREA, ENV, SUN, TRI
-from .arrays import take_rows
+from ...arrays import take_rows
+from ...bsdf import Bsdf
+from ...lights import AREA, ENV, SUN, TRI
+from ...sampling import coordinate_system
+from ...scene import BuiltScene
+from ...vecmath import dot
 from .paths import PathBatch, edge_visible, slot_rows
-from .sampling import coordinate_system
-from .scene import BuiltScene
 
 LENS, CAUSTIC, MULTICHAIN, BIDIR = 0, 1, 2, 3
 NAMES = ("lens", "caustic", "multichain", "bidirectional")
 
-
-def _dot(a, b):
-    return np.einsum("ij,ij->i", a, b)
 
 
 def _unit(v):
@@ -131,8 +129,8 @@ def _jacobian(scene: BuiltScene, paths: PathBatch) -> NDArray:
     w12, l12 = _unit(paths.p[:, 2] - paths.p[:, 1])
     n1 = paths.ng[:, 1]
     cos = np.maximum(-(w01 @ scene.camera.forward), 1e-12)
-    cos01 = np.maximum(np.abs(_dot(n1, w01)), 1e-12)
-    cos12 = np.abs(_dot(n1, w12))
+    cos01 = np.maximum(np.abs(dot(n1, w01)), 1e-12)
+    cos12 = np.abs(dot(n1, w12))
     return cos**3 * l01 * l01 * cos12 / (np.maximum(l12 * l12, 1e-300) * cos01)
 
 
@@ -192,7 +190,7 @@ def _walk_pdf(scene: BuiltScene, paths: PathBatch, rows: NDArray, j: NDArray) ->
     wo, _ = _unit(prev2 - prev)
     wi, dist = _unit(cur - prev)
     bsdf = Bsdf.from_table(scene.materials, *(slot_rows(a, rows, j - 1) for a in (paths.mat, paths.ns, paths.ng)))
-    return bsdf.pdf(wo, wi) * np.abs(_dot(slot_rows(paths.ng, rows, j), wi)) / np.maximum(dist * dist, 1e-300)
+    return bsdf.pdf(wo, wi) * np.abs(dot(slot_rows(paths.ng, rows, j), wi)) / np.maximum(dist * dist, 1e-300)
 
 
 def _light_vertex_pdf(scene: BuiltScene, paths: PathBatch, rows: NDArray) -> NDArray:
@@ -254,7 +252,7 @@ def bidirectional_mutation(ctx: MutationContext, x: PathBatch, rng: np.random.Ge
         r, bs_pdf, wi = r[ok], bs.pdf[ok], bs.wi[ok]
         s = surf.subset(np.flatnonzero(ok))
         _set_vertex(y, r, j, s.p, s.ng, s.ns, s.mat)
-        p_new[r] *= bs_pdf * np.abs(_dot(s.ng, wi)) / np.maximum(s.t * s.t, 1e-300)
+        p_new[r] *= bs_pdf * np.abs(dot(s.ng, wi)) / np.maximum(s.t * s.t, 1e-300)
         cur_wo[r] = -wi
     # Close the gap: connect to the kept suffix, or sample a new light vertex.
     keep = valid & ~to_light

@@ -1,0 +1,204 @@
+"""Paper step 5 over the image: the VPL light at every shading point of the G-buffer, by
+lightcuts (:mod:`.lightcuts`) or the brute-force ablation, split into the light of emitter
+VPLs (direct) and of the others (indirect), paced under a time limit
+(:class:`~.pacing.GatherPace`).
+
+The shading points are visited in a shuffled order of :data:`GATHER_RUN`-point runs, so every
+batch is a sample of the whole image (for the pacing and an even partial image) while
+neighbouring points stay together (coherent shadow rays).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ...bsdf import Bsdf, bsdf_max_value
+from ...scene import BuiltScene
+from ...settings import RenderSettings
+from .lightcuts import ShadingPoints, brute_force, lightcut
+from .pacing import GatherPace, Schedule
+from .vpl import GBuffer
+
+#: Absolute lightcut error floor as a fraction of max_error × the mean pixel luminance.
+ABS_FLOOR = 0.1
+#: Largest gather batch (shading points) for progress reports every ~0.25 s of work: a
+#: lightcut round of 2048 points took up to 0.97 s of CPU on the S-corridor, of 512 points
+#: 0.20 s, at the same total cost.
+PROGRESS_GATHER_POINTS = 512
+#: Shading points whose specular lobe has a roughness below this count as glossy (er_caustic).
+GLOSSY_ROUGHNESS = 0.5
+#: ``settings.lightcut_error`` → the ``error_mode`` of :func:`.lightcuts.lightcut`.
+ERROR_MODES = {"NODE": "bound", "TOTAL": "total", "LITERAL": "literal"}
+#: Consecutive shading points kept together in the shuffled gather order (coherent rays).
+GATHER_RUN = 32
+
+
+@dataclass
+class Gathered:
+    """The VPL gather per pixel: ``parts`` (2, h·w, 3) light of emitter VPLs (direct) and of
+    the others (indirect), before the energy scale; ``glossy`` (h·w, 3) the part gathered at
+    glossy shading points; ``cut`` (h·w, 1) mean cut size; ``complete`` (h·w,) every shading
+    point of the pixel was gathered."""
+
+    parts: NDArray
+    glossy: NDArray
+    cut: NDArray
+    complete: NDArray
+
+
+def per_pixel(values: NDArray, n_pixels: int, S: int) -> NDArray:
+    """Average the S shading points of each pixel: (n_pixels·S, C) → (n_pixels, C)."""
+    return values.reshape(n_pixels, S, -1).mean(axis=1)
+
+
+def per_pixel_parts(values: NDArray, S: int) -> NDArray:
+    """(K, n_pixels·S, 3) → (K, n_pixels, 3): :func:`per_pixel` of each part."""
+    K, Q = values.shape[:2]
+    return values.reshape(K, Q // S, S, 3).mean(axis=2)
+
+
+class Gather:
+    """Phase 5 of one render (module docstring).
+
+    Args:
+        scene, settings: the render's.
+        g: the G-buffer (shading points).
+        gather_batch: largest batch of shading points the memory plan allows.
+    """
+
+    def __init__(self, scene: BuiltScene, settings: RenderSettings, g: GBuffer, gather_batch: int):
+        self.scene, self.settings, self.g = scene, settings, g
+        self.gather_batch = gather_batch
+
+    def run(self, vpls, tree, gmax: float, schedule: Schedule, stats: dict, show) -> Gathered:
+        """VPL light at every shading point; ``show(point_parts, complete)`` after every batch
+        (preview).
+
+        Cancelling (or running out of time) stops after the current batch; a cancel during a
+        lightcut batch stops its refinement, so the batch keeps coarser but complete cuts.
+        """
+        scene, s, g = self.scene, self.settings, self.g
+        clock = schedule.clock
+        window = scene.camera.window
+        Q, S = len(g.pixel), g.samples
+        L = np.zeros((2, Q, 3))              # [from emitter VPLs, from the others]
+        cut = np.zeros(Q)
+        done_pt = ~g.valid                   # misses need no gather
+        pts_all = spread_order(np.flatnonzero(g.valid), s.seed)
+        if len(vpls) == 0:
+            pts_all = pts_all[:0]
+        # Absolute error floor (algorithm.md §G.6; not in the papers): below a small fraction
+        # of the mean pixel luminance, Weber's law no longer applies (dark pixels would refine
+        # to max_cut_size for errors nobody can see).
+        floor = s.max_error * ABS_FLOOR * stats.get("P", 0.0) / max(window.n_pixels, 1)
+        f_bound = bsdf_max_value(scene.materials, g.mat)
+        clamp = 0.0 if not np.isfinite(gmax) else gmax
+        share = emitter_share(tree, vpls) if tree is not None else None
+        rays = 0
+        clamped = 0.0
+        done = 0
+        pace = GatherPace(s.max_error, s.max_cut_size)
+
+        def report(f_done):
+            f = f_done / max(len(pts_all), 1)
+            return clock.poll(schedule.fraction("Lightcuts", f),
+                              f"Lightcuts {100 * f:.0f}% | {rays / 1e6:.2f}M shadow rays") \
+                and clock.remaining() > 0
+
+        # A small first batch calibrates the cost per point before the cap is fitted.
+        step = min(self.gather_batch, PROGRESS_GATHER_POINTS)
+        edges = np.unique(np.r_[0, np.arange(min(256, len(pts_all)), len(pts_all), step), len(pts_all)])
+        for start, stop in zip(edges[:-1], edges[1:]):
+            idx = pts_all[start:stop]
+            t_batch = time.perf_counter()
+            pts = self._shading_points(idx, f_bound)
+            if s.gather == "LIGHTCUTS":
+                res = lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
+                               max_error=pace.error, max_cut_size=pace.cap, clamp=clamp,
+                               abs_floor=floor, error_mode=ERROR_MODES[s.lightcut_error],
+                               return_cut=True, on_round=lambda: report(start))
+                em = _sum_rows(res.cut_point, res.cut_estimate * share[res.cut_node], len(idx))
+                L[0, idx], L[1, idx], cut[idx] = em, res.radiance - em, res.cut_size
+                rays += res.shadow_rays
+                clamped += res.clamped_energy
+            else:
+                for part, sel in enumerate((vpls.emitter, ~vpls.emitter)):
+                    if sel.any():
+                        L[part, idx] = brute_force(vpls.position[sel], vpls.normal[sel],
+                                                   vpls.intensity[sel], pts, clamp=clamp)
+                cut[idx] = len(vpls)
+                rays += len(idx) * len(vpls)
+            done = start + len(idx)
+            done_pt[idx] = True
+            pace.update(len(idx), time.perf_counter() - t_batch, cut[idx].mean(),
+                        len(pts_all) - done, clock.remaining())
+            if not report(done) and done < len(pts_all):
+                stats["gather_incomplete"] = 1
+                clock.cancelled = True
+                break
+            show(L, done_pt.reshape(-1, S).all(axis=1))
+        pace.record(stats, done)
+        valid_cut = cut[pts_all[:done]] if done else np.zeros(1)
+        stats["cut_size_mean"] = float(valid_cut.mean()) if done else 0.0
+        stats["cut_size_max"] = int(valid_cut.max()) if done else 0
+        stats["gather_shadow_rays"] = rays
+        stats["clamped_energy"] = clamped / S
+        glossy = self._glossy()
+        return Gathered(parts=per_pixel_parts(L, S),
+                        glossy=per_pixel(L.sum(axis=0) * glossy[:, None], window.n_pixels, S),
+                        cut=per_pixel(cut[:, None], window.n_pixels, S),
+                        complete=done_pt.reshape(-1, S).all(axis=1))
+
+    def _glossy(self) -> NDArray:
+        """(Q,) shading points with a specular lobe of roughness < :data:`GLOSSY_ROUGHNESS`."""
+        g, table = self.g, self.scene.materials
+        h = np.flatnonzero(g.valid)
+        out = np.zeros(len(g.pixel), bool)
+        if len(h):
+            bsdf = Bsdf.from_table(table, g.mat[h], g.ns[h], g.ng[h])
+            out[h] = ~bsdf.is_diffuse & (np.asarray(table.roughness)[g.mat[h]] < GLOSSY_ROUGHNESS)
+        return out
+
+    def _shading_points(self, idx: NDArray, f_bound: NDArray) -> ShadingPoints:
+        """The lightcut shading points of G-buffer entries ``idx`` (BSDF and visibility
+        callbacks; ``f_bound`` (Q,) the materials' bound)."""
+        scene, g = self.scene, self.g
+        bsdf = Bsdf.from_table(scene.materials, g.mat[idx], g.ns[idx], g.ng[idx])
+        wo, ng = g.wo[idx], g.ng[idx]
+        p = g.p[idx]
+
+        def eval_f(k, wi):
+            return bsdf.subset(k).eval(wo[k], wi)
+
+        def visible(k, q, qn):
+            return scene.tracer.visible(p[k], ng[k], q, qn)
+
+        return ShadingPoints(p, g.ns[idx], wo, f_bound[idx], eval_f, visible)
+
+
+def spread_order(points: NDArray, seed: int) -> NDArray:
+    """``points`` in a shuffled order of runs of :data:`GATHER_RUN` (deterministic per
+    seed): every gather batch samples the whole image (for pacing and an even partial
+    image) while neighbouring points stay together (coherent shadow rays)."""
+    runs = np.arange(0, len(points), GATHER_RUN)
+    order = np.random.default_rng([seed, 0x6A7]).permutation(len(runs))
+    starts = runs[order]
+    idx = (starts[:, None] + np.arange(GATHER_RUN)[None, :]).ravel()
+    return points[idx[idx < len(points)]]
+
+
+def emitter_share(tree, vpls) -> NDArray:
+    """(n_nodes, 3) fraction of each light-tree node's intensity that comes from emitter VPLs
+    (the subtree sums of ``vpls.emitter`` intensities over the node's intensity)."""
+    em = vpls.intensity * vpls.emitter[:, None]
+    cs = np.vstack([np.zeros((1, 3)), np.cumsum(em[tree.leaf_order], axis=0)])
+    sub = cs[tree.leaf_start + tree.leaf_count] - cs[tree.leaf_start]
+    return np.divide(sub, tree.intensity, out=np.zeros_like(sub), where=tree.intensity > 0)
+
+
+def _sum_rows(group: NDArray, values: NDArray, n: int) -> NDArray:
+    """(n, 3) per-group sums of (K, 3) rows."""
+    return np.stack([np.bincount(group, weights=values[:, c], minlength=n) for c in range(3)], axis=1)

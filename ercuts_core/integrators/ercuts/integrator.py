@@ -1,0 +1,432 @@
+"""The Ercuts integrator (Zhu, Xu, Pan 2010): BDPT → ER chains → VPLs → light tree → lightcuts.
+
+Phases (each a module named after the paper's step):
+
+1. :mod:`.initialization` (seed paths: :mod:`.seeding`) — rough BDPT image, its energy P (paths with a
+   surface x2 that VPLs stand for), and fresh seed paths;
+2. :mod:`.er_sampling` — equal-length Markov chains, each state worth e_d = P/n;
+3. :mod:`.vpl` — a VPL at every chain's x2, merged by identity, normalised;
+4. :mod:`.light_tree` — the binary light tree with the paper's pairing weight;
+5. :mod:`.lightcuts` — per shading point, a cut refined until the error
+   bound is under ``max_error`` of the estimate.
+
+Direct light (``direct_light``). With 'NEE' (the default) the light that reaches the
+camera directly or after one scattering — emitters and world seen directly, and direct
+light from every light — is rendered in its own phase after the rough image, ``direct_samples``
+jittered (anti-aliased) passes of next-event estimation with MIS (:meth:`_direct_passes`);
+the chains are restricted to indirect paths (x2 scatters, k ≥ 3), P is the rough image's
+indirect energy, and the VPLs carry indirect light only. VPLs standing for area lights
+(the paper's and Lightcuts' representation, kept as 'VPL') make soft shadows blotchy and,
+through the per-VPL normalisation 1/Ê1 of VPLs that light few pixels, give occasional
+bright faces (directly lit benchmark scene, 10 s: relMSE 0.005–0.29 over three seeds).
+With 'VPL' the image is the sum of what the VPLs cannot represent — light seen directly
+and direct light from point, spot, sun and environment lights, by next-event estimation at
+the shading points — and the VPL gather. Either way the ERPT fallback of VPLs that lit no
+sampled pixel is added.
+
+Time: with ``time_limit`` > 0 each phase gets its share of the time left
+(:mod:`.pacing`; fewer E1 samples per VPL if needed), and the gather (:mod:`.gather`) raises
+the lightcut error threshold (or lowers it back toward ``max_error``) so the rest fits the
+time left; a phase that runs out stops cleanly (fewer passes, shorter chains, coarser cuts)
+and the stats say so.
+
+Progress and cancellation (api.md): messages start with the phase ("BDPT", "Direct light",
+"ER chains", "VPLs", "Light tree", "Lightcuts", fractions in :data:`.pacing.PHASES`); previews show
+the rough image after each BDPT pass and the image so far during the gather. A cancel (or
+the time limit) before the gather returns the rough BDPT image; during the gather, the
+pixels gathered so far (the current batch finishes with coarser cuts) and the rough image
+elsewhere.
+
+Passes (``RenderResult.aovs``), per pixel:
+
+* 'emission' — emitters and world seen directly ('NEE': of the direct passes; 'VPL': of
+  the first shading point);
+* 'direct' — 'NEE': the direct passes' light scattered once; 'VPL': next-event light from
+  point, spot, sun and environment lights, plus the gathered light of *emitter VPLs* (x2
+  is the chain path's light vertex, k = 2: light from an area light or emissive mesh
+  scattered once, at x1) and their fallback deposits;
+* 'indirect' — the gathered light of all other VPLs (x2 scatters) and their fallback.
+  The split of a lightcut cluster follows its intensity: the estimate M·G·V·I_C of a cut
+  node is divided by the node's share of emitter-VPL intensity. emission + direct +
+  indirect is the image. Light in a pass is the image's (after the global energy scale),
+  so the split is as good as the VPL image; BDPT/PATH classify every path exactly.
+* 'vpl_density' (h, w, 1) — the number of (merged, normalised) VPLs whose position the
+  camera sees in the pixel (projected, unoccluded): where the light sources of the
+  gather sit.
+* 'er_caustic' (h, w, 3) — the ER chain energy that does not reach the pixel through a
+  diffuse-looking VPL: the gathered VPL light at *glossy* shading points (a specular lobe
+  with roughness < :data:`GLOSSY_ROUGHNESS`, where the paper renders caustic paths by ERPT
+  instead) plus the ERPT fallback deposits of VPLs that lit no sampled pixel. This
+  implementation deposits no separate caustic ERPT energy (the material model has no delta
+  lobes and every chain state deposits into its VPL), so er_caustic is a *part* of
+  direct + indirect, not an addition to the image; 0 in scenes without glossy surfaces and
+  fallback deposits.
+* 'cut_size' (h, w, 1) mean lightcut size, 'chain_deposits' (h, w, 1) chain states whose
+  x1 lies in the pixel, and 'depth', 'normal', 'albedo' of the first shading point.
+"""
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ...bsdf import Bsdf
+from ...film import Film
+from ...lights import ENV, POINT, SUN
+from ...memory import plan
+from ...sampling import luminance
+from ...scene import BuiltScene
+from ...settings import RenderSettings
+from ...vecmath import dot
+from ..base import Clock, progress_batch_pixels, run_passes
+from ..bdpt import BDPTIntegrator
+from ..path import PathIntegrator
+from .er_sampling import chain_starts, run_chains
+from .gather import Gather, Gathered, per_pixel, per_pixel_parts
+from .initialization import indirect_energy, rough_image_energy, seeds_from_path_tracer
+from .light_tree import build_light_tree
+from .mutations import NAMES, MutationContext
+from .pacing import Schedule
+from .paths import PathBatch
+from .seeding import seed_paths
+from .vpl import GBuffer, build_gbuffer, g_clamp, make_vpls
+
+#: Conservative throughput of the E1 estimate (light-traced samples per second, 2 cores).
+_E1_RATE = 1.0e6
+#: Largest E1 chunk (samples) for progress reports every ~0.25 s of work.
+PROGRESS_E1_CHUNK = 1 << 16
+
+
+class _Stopped(Exception):
+    """Cancelled, or out of time, before the gather: the rough BDPT image is the result."""
+
+
+class ErcutsIntegrator:
+    """Runs the five phases on a built scene (see the module docstring)."""
+
+    def __init__(self, scene: BuiltScene, settings: RenderSettings):
+        self.scene = scene
+        self.settings = settings
+        self.memory = plan(scene.camera.window.n_pixels, scene.desc.mesh.n_triangles, settings)
+
+    # ------------------------------------------------------------------ driver
+    def render(self, film: Film, clock: Clock, timings: dict, stats: dict) -> None:
+        """Render into ``film``; a cancel (or the time limit) before the gather leaves the
+        rough BDPT image there, during the gather the rough image where not gathered."""
+        self.clock, self.timings, self.stats = clock, timings, stats
+        self.schedule = Schedule(clock, self.settings.direct_vpls)
+        self.rough: Film | None = None
+        try:
+            self._render(film)
+        except _Stopped:
+            film.merge(self.rough)
+
+    def _render(self, film: Film) -> None:
+        s, stats = self.settings, self.stats
+        rng = np.random.default_rng([s.seed, 0xE5C7])
+        with self._phase("bdpt"):                 # 1. rough BDPT image and P
+            rough = self.rough = self._rough_bdpt()
+        stats["bdpt_samples"] = rough.passes_done
+        self.clock.show(rough.image)
+        P_all = rough_image_energy(rough.image())
+        if not s.direct_vpls:     # light seen directly and scattered once: its own passes
+            P = indirect_energy(rough.light_parts())
+            self.schedule.grow_direct(1.0 - P / P_all if P_all > 0 else 0.0)
+            with self._phase("direct"):
+                base, alpha = self._direct_light()
+        with self._phase("seeds"):
+            g, _ = build_gbuffer(self.scene, s.shading_samples, rng)
+            if s.direct_vpls:
+                base, alpha = self._direct_image(g, rng), self._alpha(g)
+                P = max(P_all - float(luminance(base.sum(axis=0)).sum()), 0.0)
+            stats["P"], stats["P_all"] = P, P_all
+            seeds, starts = self._chain_seeds(P, rng)
+        with self._phase("chains", check=False):  # 2. ER chains
+            chains = self._run_chains(seeds, starts, rng)
+        # With a shortened run every chain made the same number of steps: e_d stays P/n.
+        n_states = chains.n_chains * chains.steps_done
+        e_d = P / n_states if n_states else 0.0
+        self._chain_stats(chains, n_states)
+        self._check()
+        gmax = g_clamp(self.scene, s.clamp)
+        with self._phase("vpls"):                 # 3. VPLs
+            vpls = self._make_vpls(g, chains, e_d, gmax, rng)
+        with self._phase("tree"):                 # 4. light tree
+            tree = self._light_tree(vpls)
+        with self._phase("cuts", check=False):    # 5. lightcuts (or the brute-force ablation)
+            gathered = self._gather(g, vpls, tree, gmax, base, alpha)
+        scale = self._energy_scale(gathered.parts.sum(axis=0), vpls, P)
+        light = self._compose(base, gathered.parts, vpls, scale)
+        if not gathered.complete.all():     # cancelled: the rough image where not gathered
+            light = np.where(gathered.complete[None, :, None], light, rough.light_parts())
+        film.set_pixels(light, alpha)
+        self._finish(film, g, chains, vpls, gathered, scale)
+
+    @contextmanager
+    def _phase(self, name: str, check: bool = True):
+        """Time the block as ``timings[name]``; then stop the render (:class:`_Stopped`) if it
+        was cancelled or ran out of time, unless ``check`` is False."""
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.timings[name] = time.perf_counter() - t0
+        if check:
+            self._check()
+
+    def _check(self) -> None:
+        """Stop the render (:class:`_Stopped`) if it was cancelled or ran out of time."""
+        if self.clock.cancelled:
+            raise _Stopped
+
+    # ------------------------------------------------------------------ phase 1
+    def _rough_bdpt(self) -> Film:
+        """``samples`` BDPT passes (fewer if the phase's time share runs out)."""
+        return self._passes(BDPTIntegrator(self.scene, self.settings), "BDPT", (), "bdpt",
+                            show=True, samples=self.settings.samples)
+
+    def _direct_light(self) -> tuple[NDArray, NDArray]:
+        """``direct_samples`` jittered passes of the light that reaches the camera directly or after
+        one scattering (path tracing with ``max_depth`` = 1: next-event estimation from every
+        light with MIS against BSDF sampling, emitters and world seen directly), fewer if the
+        phase's time share runs out; the rough image stays on screen meanwhile.
+
+        Returns the passes' (3, h·w, 3) light passes and (h·w,) coverage; the film goes."""
+        path = PathIntegrator(self.scene, self.settings.replace(max_depth=1))
+        direct = self._passes(path, "Direct light", (0xD1,), "direct", show=False,
+                              samples=self.settings.direct_samples)
+        self.stats["direct_samples"] = direct.passes_done
+        return direct.light_parts(), direct.alpha / max(direct.passes_done, 1)
+
+    def _passes(self, integrator, phase: str, key: tuple, share: str, show: bool, samples: int) -> Film:
+        """:func:`~ercuts_core.integrators.base.run_passes` within ``share``'s deadline."""
+        s, window = self.settings, self.scene.camera.window
+        return run_passes(integrator, Film(window), self.clock, samples=samples,
+                          batch=min(self.memory.batch_pixels, progress_batch_pixels(s)), phase=phase,
+                          key=key, fraction=lambda f: self.schedule.fraction(phase, f),
+                          deadline=self.schedule.deadline(share), show=show)
+
+    def _seeds(self, rng, pix=None):
+        s, scene = self.settings, self.scene
+        if s.seeding == "BDPT":
+            return seed_paths(scene, s, rng, pix)
+        return seeds_from_path_tracer(scene, s.max_depth, rng, pix, direct=s.direct_vpls)
+
+    def _chain_seeds(self, P: float, rng) -> tuple[PathBatch, NDArray]:
+        """Seed paths (fresh paths, one sample per pixel) and their chain counts for chains
+        whose states are worth e_d = P/n, n = chains_per_pixel · chain_length · pixels; in
+        batches of ``memory.seed_pixels`` pixels (at most
+        :func:`~ercuts_core.integrators.base.progress_batch_pixels`, reporting progress after
+        each); only seeds that start a chain are kept, so the seed memory is that of one batch."""
+        s, n = self.settings, self.scene.camera.window.n_pixels
+        n_target = s.chains_per_pixel * s.chain_length * n
+        e_d = P / n_target if n_target > 0 else 0.0
+        step = min(self.memory.seed_pixels, progress_batch_pixels(s))
+        if step >= n:
+            seeds, energy = self._seeds(rng)
+            starts = chain_starts(energy, s.chain_length, e_d, rng)
+            self.schedule.report("ER chains", 0.1, "ER chains: seed paths 100%")
+            self.stats["seed_paths"] = len(seeds)
+            return seeds.take(starts > 0), starts[starts > 0]
+        kept, counts, total = [], [], 0
+        for start in range(0, n, step):
+            seeds, energy = self._seeds(rng, np.arange(start, min(n, start + step)))
+            starts = chain_starts(energy, s.chain_length, e_d, rng)
+            kept.append(seeds.take(np.flatnonzero(starts > 0)))
+            counts.append(starts[starts > 0])
+            total += len(seeds)
+            f = min(n, start + step) / n
+            if not self.schedule.report("ER chains", 0.1 * f, f"ER chains: seed paths {100 * f:.0f}%"):
+                break
+        self.stats["seed_paths"] = total
+        seeds, starts = PathBatch.concat(kept), np.concatenate(counts)
+        return seeds.take(starts > 0), starts[starts > 0]
+
+    # ------------------------------------------------------------------ phase 2
+    def _run_chains(self, seeds: PathBatch, starts: NDArray, rng):
+        """``starts[i]`` chains of ``chain_length`` steps from each seed (paper §3.2)."""
+        s, clock, sched = self.settings, self.clock, self.schedule
+        ctx = MutationContext(self.scene, s.max_depth + 1, direct=s.direct_vpls)
+        enabled = (s.lens_perturbation, s.caustic_perturbation, s.multichain_perturbation,
+                   s.bidirectional_mutation)
+        deadline = sched.deadline("chains")
+        label = f"| {int(starts.sum())} chains x {s.chain_length} steps"
+        return run_chains(ctx, seeds, starts, s.chain_length, enabled, rng,
+                          lambda f: sched.alive(deadline, "ER chains", 0.1 + 0.9 * f, label),
+                          interrupt=lambda f: clock.poll(sched.fraction("ER chains", 0.1 + 0.9 * f),
+                                                         f"ER chains {100 * f:.0f}% {label}"))
+
+    # ------------------------------------------------------------------ phase 3
+    def _make_vpls(self, g: GBuffer, chains, e_d: float, gmax: float, rng):
+        """VPLs at the chains' x2, normalised with ``e1_samples`` light-traced samples each
+        (fewer when the phase's time share asks for it)."""
+        s, stats, sched = self.settings, self.stats, self.schedule
+        n_e1 = s.e1_samples
+        if self.clock.deadline is not None:
+            budget = max(sched.deadline("vpl") - time.perf_counter(), 0.0)
+            n_e1 = int(min(n_e1, max(16, budget * _E1_RATE / max(int((chains.count > 0).sum()), 1))))
+        stats["e1_samples"] = n_e1
+        label = f"| {stats['vpls_after_merge']} VPLs x {n_e1} E1 samples"
+        vpls = make_vpls(self.scene, g, chains, e_d, gmax, n_e1, rng,
+                         chunk=min(self.memory.e1_chunk, PROGRESS_E1_CHUNK),
+                         keep_going=lambda f: sched.report("VPLs", f, f"VPLs {100 * f:.0f}% {label}"))
+        stats["vpls"] = len(vpls)
+        stats["vpls_emitter"] = int(vpls.emitter.sum())
+        stats["vpls_unlit_fallback"] = int(chains.count[chains.count > 0].size - len(vpls))
+        return vpls
+
+    # ------------------------------------------------------------------ phase 4
+    def _light_tree(self, vpls):
+        """The light tree over the VPLs (None for the brute-force ablation or no VPLs)."""
+        s, sched = self.settings, self.schedule
+        tree = None
+        label = f"| {len(vpls)} VPLs"
+        if s.gather == "LIGHTCUTS" and len(vpls):
+            tree = build_light_tree(vpls.position, vpls.normal, vpls.intensity, seed=s.seed,
+                                    pairing=s.tree_pairing.lower(),
+                                    keep_going=lambda f: sched.report(
+                                        "Light tree", f, f"Light tree {100 * f:.0f}% {label}"))
+        if not self.clock.cancelled:
+            sched.report("Light tree", 1.0, f"Light tree {label}")
+        return tree
+
+    # ------------------------------------------------------------------ phase 5
+    def _gather(self, g: GBuffer, vpls, tree, gmax: float, base: NDArray, alpha: NDArray) -> Gathered:
+        """Phase 5 (:class:`~.gather.Gather`), previewing the gathered pixels over the rough
+        image after every batch."""
+        window = self.scene.camera.window
+        rough_parts = self.rough.light_parts()
+
+        def show(point_parts, complete):
+            def image():
+                parts = self._compose(base, per_pixel_parts(point_parts, g.samples), None, 1.0)
+                return _rgba(window, np.where(complete[None, :, None], parts, rough_parts), alpha)
+            self.clock.show(image)
+
+        gather = Gather(self.scene, self.settings, g, self.memory.gather_batch)
+        return gather.run(vpls, tree, gmax, self.schedule, self.stats, show)
+
+    # ------------------------------------------------------------------ non-VPL light
+    def _direct_image(self, g: GBuffer, rng, n_light_samples: int = 4) -> NDArray:
+        """(3, h·w, 3) by light pass: [emitters and world seen directly, direct light from
+        point, spot, sun and environment (next-event estimation), zeros]."""
+        scene, s = self.scene, self.settings
+        lights = scene.lights
+        S = g.samples
+        L = np.zeros((3, len(g.pixel), 3))
+        hit = g.valid
+        L[0, hit] = scene.emission(g.surf.subset(np.flatnonzero(hit)))
+        if lights.env_light >= 0 and not s.film_transparent:
+            L[0, ~hit] = lights.env_L
+        nonvpl = np.isin(lights.kind, [POINT, SUN, ENV])
+        if nonvpl.any() and hit.any():
+            h = np.flatnonzero(hit)
+            bsdf = Bsdf.from_table(scene.materials, g.mat[h], g.ns[h], g.ng[h])
+            acc = np.zeros((len(h), 3))
+            for _ in range(n_light_samples):
+                ls = lights.illuminate(g.p[h], rng.random(len(h)), rng.random((len(h), 2)))
+                use = ls.valid & nonvpl[ls.light]
+                f = bsdf.eval(g.wo[h], ls.wi) * np.abs(dot(g.ns[h], ls.wi))[:, None]
+                c = f * ls.Li / np.where(use, ls.pdf_w, 1.0)[:, None] * use[:, None]
+                t = np.flatnonzero(c.max(axis=1) > 0)
+                if len(t):
+                    infinite = ~np.isfinite(ls.dist[t])
+                    target = np.where(infinite[:, None], g.p[h[t]] + ls.wi[t] * 4 * scene.scene_radius, ls.p[t])
+                    vis = scene.tracer.visible(g.p[h[t]], g.ng[h[t]], target, None)
+                    acc[t] += c[t] * vis[:, None]
+            L[1, h] = acc / n_light_samples
+        return per_pixel_parts(L, S)
+
+    def _energy_scale(self, gather: NDArray, vpls, P: float) -> float:
+        """The factor that makes the VPL image's energy P (paper §3.3: every path carries P/n).
+
+        Each VPL is normalised by its own estimate Ê1 (vpl.py); the average of 1/Ê1 is
+        biased high (Jensen), a few per cent with 256 light-traced samples. The ratio
+        P / E(VPL image) removes that bias globally while the per-VPL Ê1 keep the relative
+        intensities. The raw ratio is reported as ``vpl_energy_ratio`` (1 = unbiased); an
+        incomplete gather is not rescaled (returns 1).
+        """
+        stats = self.stats
+        energy = float(luminance(gather + vpls.fallback).sum())
+        stats["vpl_energy_ratio"] = energy / P if P > 0 else 0.0
+        if energy <= 0 or P <= 0 or stats.get("gather_incomplete"):
+            return 1.0
+        return P / energy
+
+    @staticmethod
+    def _compose(base: NDArray, gather: NDArray, vpls, scale: float) -> NDArray:
+        """(3, h·w, 3) light passes: ``base`` (emission, non-VPL direct) plus the gathered light
+        of emitter VPLs (direct) and of the others (indirect), and the ERPT fallback of VPLs
+        that lit no sampled pixel, all VPL light times ``scale``."""
+        out = base.copy()
+        out[1] += gather[0] * scale
+        out[2] += gather[1] * scale
+        if vpls is not None:
+            out[1] += vpls.fallback_emitter * scale
+            out[2] += (vpls.fallback - vpls.fallback_emitter) * scale
+        return out
+
+    def _alpha(self, g: GBuffer) -> NDArray:
+        """(h·w,) coverage: the fraction of shading points that hit, or 1."""
+        hit = g.valid.astype(np.float64) if self.settings.film_transparent else np.ones(len(g.pixel))
+        return per_pixel(hit[:, None], self.scene.camera.window.n_pixels, g.samples)[:, 0]
+
+    # ------------------------------------------------------------------ output
+    def _chain_stats(self, chains, n_states: int) -> None:
+        stats = self.stats
+        stats["chains"] = chains.n_chains
+        stats["chain_steps"] = chains.steps_done
+        stats["chain_states"] = n_states
+        stats["vpls_before_merge"] = n_states
+        stats["vpls_after_merge"] = int((chains.count > 0).sum())
+        stats["nan_acceptances"] = chains.nan_acceptances
+        for i, name in enumerate(NAMES):
+            stats[f"proposed_{name}"] = int(chains.proposed[i])
+            stats[f"accepted_{name}"] = int(chains.accepted[i])
+            stats[f"acceptance_{name}"] = float(chains.accepted[i] / chains.proposed[i]) if chains.proposed[i] else 0.0
+
+    def _finish(self, film: Film, g: GBuffer, chains, vpls, gathered: Gathered, scale: float) -> None:
+        """First-hit and Ercuts AOVs of the one-pass result (module docstring)."""
+        window = self.scene.camera.window
+        n, S = window.n_pixels, g.samples
+        h = np.flatnonzero(g.valid)
+        depth = np.where(g.valid, g.surf.t, 1e10)[:, None]
+        albedo = np.zeros((len(g.pixel), 3))
+        if len(h):
+            albedo[h] = Bsdf.from_table(self.scene.materials, g.mat[h], g.ns[h], g.ng[h]).albedo()
+        film.aov_sum["depth"] = per_pixel(depth, n, S)
+        film.aov_sum["normal"] = per_pixel(np.where(g.valid[:, None], g.ns, 0.0), n, S)
+        film.aov_sum["albedo"] = per_pixel(albedo, n, S)
+        film.aov_sum["chain_deposits"] = chains.deposits_per_pixel[:, None].astype(np.float64)
+        film.aov_sum["cut_size"] = gathered.cut
+        film.aov_sum["vpl_density"] = self._vpl_density(vpls)[:, None]
+        film.aov_sum["er_caustic"] = (gathered.glossy + vpls.fallback) * scale * gathered.complete[:, None]
+
+    def _vpl_density(self, vpls) -> NDArray:
+        """(h·w,) number of VPLs seen by the camera in each pixel (position projected to the
+        image, unoccluded)."""
+        scene = self.scene
+        cam, window = scene.camera, scene.camera.window
+        out = np.zeros(window.n_pixels)
+        if len(vpls) == 0:
+            return out
+        raster, ok = cam.raster_of(vpls.position)
+        pix, inside = window.pixel(raster)
+        k = np.flatnonzero(ok & inside)
+        if len(k) == 0:
+            return out
+        p = vpls.position[k]
+        far = p - cam.forward * 4.0 * scene.scene_radius
+        eye = far if cam.ortho else np.broadcast_to(cam.position, p.shape)
+        n = vpls.normal[k] * np.where(dot(vpls.normal[k], eye - p) < 0, -1.0, 1.0)[:, None]
+        vis = scene.tracer.visible(p, n, np.ascontiguousarray(eye), None)
+        return np.bincount(pix[k[vis]], minlength=window.n_pixels).astype(np.float64)
+
+
+
+def _rgba(window, parts: NDArray, alpha: NDArray) -> NDArray:
+    """(h, w, 4) float32 image of (3, h·w, 3) light passes and (h·w,) alpha."""
+    rgba = np.concatenate([parts.sum(axis=0), alpha[:, None]], axis=1)
+    return rgba.reshape(window.height, window.width, 4).astype(np.float32)

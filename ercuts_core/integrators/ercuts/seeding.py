@@ -1,0 +1,121 @@
+"""Seed paths for the ER chains from one fresh BDPT sample per pixel (paper §3.2: "at each
+pixel a fresh bidirectional path"; Mitsuba's ``PathSampler::samplePaths``).
+
+The BDPT integrator reports every sampled path through its ``on_connections`` callback
+(:class:`~ercuts_core.integrators.bdpt.Connection`); :class:`SeedCollector` rebuilds each
+as an eye-first :class:`~ercuts_core.integrators.ercuts.paths.PathBatch` x0 … x_k.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ...film import Film
+from ...lights import AREA, ENV, SUN, TRI
+from ...scene import BuiltScene
+from ...settings import RenderSettings
+from ..bdpt import BDPTIntegrator, Connection, Subpaths
+from .paths import PathBatch, is_target
+
+
+class SeedCollector:
+    """The ``on_connections`` callback that keeps every connection as a path.
+
+    Attributes:
+        batches: list of (paths, (R,) energies) per BDPT batch of lanes.
+    """
+
+    def __init__(self, scene: BuiltScene, n_slots: int):
+        self.scene = scene
+        self.n_slots = n_slots
+        self.batches: list[tuple[PathBatch, NDArray]] = []
+
+    def __call__(self, cam: Subpaths, lig: Subpaths, rows: list[Connection]) -> None:
+        self.batches.append(self._paths(cam, lig, rows))
+
+    def _paths(self, cam: Subpaths, lig: Subpaths, rows: list[Connection]) -> tuple[PathBatch, NDArray]:
+        """The connection rows of one batch as eye-first paths x0 … x_k."""
+        K = self.n_slots
+        out = [(self._group(cam, lig, rec), rec.e) for rec in rows if len(rec.lane)]
+        if not out:     # a strategy may have no rows in a batch (seen at max_depth <= 4)
+            return PathBatch.empty(0, K), np.zeros(0)
+        return PathBatch.concat([o[0] for o in out]), np.concatenate([o[1] for o in out])
+
+    def _group(self, cam: Subpaths, lig: Subpaths, rec: Connection) -> PathBatch:
+        lights = self.scene.lights
+        lane, s, t = rec.lane, rec.s, rec.t
+        R = len(lane)
+        P = PathBatch.empty(R, self.n_slots)
+        rows = np.arange(R)
+        # Camera vertices x0 … x_{t−1}
+        for j in range(int(t.max())):
+            r = np.flatnonzero(t > j)
+            _put_vertex(P, r, np.full(len(r), j), cam, np.full(len(r), j), lane[r])
+        # Light surface vertices x_t … x_{t+s−2} = y_{s−1} … y_1
+        for i in range(int(s.max()) - 1):
+            r = np.flatnonzero(s - 1 - i >= 1)
+            _put_vertex(P, r, t[r] + i, lig, s[r] - 1 - i, lane[r])
+        # The light vertex x_k
+        if rec.light_sample is not None:                           # s = 1: the light sample
+            k, p_l, n_l, light = t, rec.light_sample.p, rec.light_sample.n, rec.light_sample.light
+        elif (s == 0).all():                                       # s = 0: the emitter hit
+            k = t - 1
+            env = cam.at("env", k, lane)
+            vr = cam.rows(k, lane)
+            p_l = np.where(env[:, None], -vr.wo, vr.p)
+            n_l = np.where(env[:, None], 0.0, vr.ng)
+            light = np.full(R, max(lights.env_light, 0))
+            light[~env] = lights.tri_light[cam.at("prim", k, lane)[~env]]
+        else:                                                      # s ≥ 2: y_0
+            k = t + s - 1
+            kind = lig.kind0[lane]
+            infinite = (kind == SUN) | (kind == ENV)
+            on_surf = (kind == AREA) | (kind == TRI)
+            p_l = np.where(infinite[:, None], lig.wo[1, lane], lig.p[0, lane])
+            n_l = np.where(on_surf[:, None], lig.ng[0, lane], 0.0)
+            light = lig.light[lane]
+        P.p[rows, k], P.ng[rows, k], P.ns[rows, k] = p_l, n_l, n_l
+        P.mat[rows, k] = 0
+        P.k[:], P.light[:] = k, light
+        P.raster[:] = rec.raster if rec.raster is not None else cam.raster[lane]
+        return P
+
+
+def _put_vertex(P: PathBatch, r: NDArray, slot: NDArray, path: Subpaths, k: NDArray,
+                lane: NDArray) -> None:
+    """Path rows ``r``, slot ``slot``: vertex ``k`` of subpath ``lane``."""
+    vr = path.rows(k, lane)
+    P.p[r, slot], P.ng[r, slot], P.ns[r, slot] = vr.p, vr.ng, vr.ns
+    P.mat[r, slot] = path.at("mat", k, lane)
+
+
+def seed_paths(scene: BuiltScene, settings: RenderSettings, rng: np.random.Generator,
+               pix: NDArray | None = None) -> tuple[PathBatch, NDArray]:
+    """Seed paths for the ER chains from one fresh BDPT sample per pixel.
+
+    Every connection strategy with a non-zero, unoccluded MIS-weighted contribution w·C
+    becomes one eye-first path (:mod:`~ercuts_core.integrators.ercuts.paths` conventions)
+    with energy e = Y(w·C) in image units: camera-sample rows count toward their pixel,
+    light-tracing (t = 1) rows are divided by the number of window pixels like their
+    splats, so Σe is an unbiased estimate of the image energy Σ_pixels Y. Only target-class
+    paths (x2 on a surface, :func:`~ercuts_core.integrators.ercuts.paths.is_target`; x2
+    scattering unless ``settings.direct_light`` is 'VPL') with e > 0 are returned.
+
+    Args:
+        pix: window pixels to sample (default: all).
+    Returns:
+        (S paths with ``settings.max_depth + 2`` slots, (S,) energies).
+    """
+    K = settings.max_depth + 2
+    collect = SeedCollector(scene, K)
+    bdpt = BDPTIntegrator(scene, settings, on_connections=collect)
+    pix = np.arange(bdpt.window.n_pixels) if pix is None else np.asarray(pix)
+    for start in range(0, len(pix), bdpt.max_lanes):
+        bdpt.render_batch(Film(bdpt.window), pix[start:start + bdpt.max_lanes], rng)
+    parts = [b for b in collect.batches if len(b[0])]
+    if not parts:
+        return PathBatch.empty(0, K), np.zeros(0)
+    paths = PathBatch.concat([b[0] for b in parts])
+    e = np.concatenate([b[1] for b in parts])
+    keep = is_target(scene, paths, settings.direct_vpls) & (e > 0)
+    return paths.take(keep), e[keep]

@@ -30,7 +30,8 @@ from numpy.typing import NDArray
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from ercuts_core.integrators.ercuts.light_tree import build_light_tree, luminance  # noqa: E402
+from ercuts_core.integrators.ercuts.light_tree import build_light_tree  # noqa: E402
+from ercuts_core.sampling import luminance  # noqa: E402
 from ercuts_core.integrators.ercuts.lightcuts import ShadingPoints, brute_force, lightcut  # noqa: E402
 
 ROOM = np.array([4.0, 4.0, 3.0])

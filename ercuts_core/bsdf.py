@@ -49,7 +49,7 @@ from numpy.typing import ArrayLike, NDArray
 from .arrays import take_rows
 from .description import MaterialTable
 from .sampling import INV_PI, coordinate_system, luminance, sample_cosine_hemisphere, to_local, to_world
-from .vecmath import dot
+from .vecmath import dot, normalize
 
 F64 = NDArray[np.float64]
 B = NDArray[np.bool_]
@@ -75,8 +75,7 @@ def _div(num: F64, den: F64) -> F64:
 
 def _normalize(v: F64) -> F64:
     """Unit rows of (N, 3) ``v``; zero rows stay zero."""
-    length = np.sqrt(dot(v, v))
-    return _div(v, length[:, None])
+    return normalize(v)[0]
 
 
 def _as3(v: ArrayLike) -> F64:

@@ -45,16 +45,11 @@ from .sampling import (
     sample_uniform_triangle,
     to_world,
 )
-from .vecmath import dot
+from .vecmath import dot, normalize
 
 POINT, SUN, AREA, TRI, ENV = 0, 1, 2, 3, 4
 _INV_4PI = 1.0 / (4.0 * np.pi)
 
-
-
-def _normalize(v: NDArray) -> tuple[NDArray, NDArray]:
-    n = np.linalg.norm(v, axis=1)
-    return v / np.maximum(n, 1e-300)[:, None], n
 
 
 def smoothstep(x: NDArray) -> NDArray:
@@ -140,7 +135,7 @@ class LightSet:
         # Per-kind tables (float64).
         self.pt_pos = pl.position.astype(np.float64)
         self.pt_I = pl.intensity.astype(np.float64)
-        self.pt_axis = _normalize(pl.direction.astype(np.float64) + 1e-300)[0]
+        self.pt_axis = normalize(pl.direction.astype(np.float64) + 1e-300)[0]
         self.pt_cos = pl.cos_half_angle.astype(np.float64)
         self.pt_blend = pl.blend.astype(np.float64)
         self.sun_dir = sl.direction.astype(np.float64)
@@ -249,7 +244,7 @@ class LightSet:
         if m.any():
             i = loc[m]
             p[m] = self.pt_pos[i]
-            w_out, d = _normalize(x[m] - p[m])
+            w_out, d = normalize(x[m] - p[m])
             Li[m] = self.pt_I[i] * self.spot_factor(i, w_out)[:, None] / np.maximum(d, 1e-30)[:, None] ** 2
             pdf_dir[m] = np.where(self.pt_cos[i] > -1, 1.0 / (2 * np.pi * (1 - self.pt_cos[i])), _INV_4PI)
         m = kind == SUN
@@ -282,7 +277,7 @@ class LightSet:
             Li[m] = self.env_L
             pdf_area[m] = 1.0 / (np.pi * self.radius**2)
             pdf_dir[m] = _INV_4PI
-        wi, dist = _normalize(p - x)
+        wi, dist = normalize(p - x)
         infinite = (kind == SUN) | (kind == ENV)
         dist = np.where(infinite, np.inf, dist)
         is_delta = (kind == POINT) | (kind == SUN)
@@ -316,7 +311,7 @@ class LightSet:
         m = light >= 0
         out = np.zeros(len(prim))
         if m.any():
-            w, d = _normalize(p[m] - x[m])
+            w, d = normalize(p[m] - x[m])
             cos_l = np.abs(dot(ng[m], w))
             area = self.tri_area[self.local[light[m]]]
             out[m] = self.pmf(light[m]) / area * d**2 / np.maximum(cos_l, 1e-300)

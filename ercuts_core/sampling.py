@@ -67,6 +67,10 @@ def _safe_sqrt(x: F64) -> F64:
     return np.sqrt(np.maximum(x, 0.0))
 
 
+#: Rec.709 luminance weights (Blender's colours are linear Rec.709).
+LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+
+
 def luminance(rgb: ArrayLike) -> F64:
     """Relative luminance of linear Rec.709 RGB: Y = 0.2126 R + 0.7152 G + 0.0722 B.
 

@@ -37,7 +37,8 @@ class RenderSettings:
         max_error: lightcut error threshold relative to the estimate (Weber's law, 2 %).
         chains_per_pixel: average number of ER chains started per pixel (c).
         chain_length: mutation steps per chain (N); every step deposits P/n.
-        lens_perturbation, caustic_perturbation, multichain_perturbation,
+        lens_perturbation, caustic_perturbation, multichain_perturbation (inactive: it needs
+        perfectly specular lobes, which the core does not have yet; hidden in the UI),
         bidirectional_mutation: Veach's mutations used by the chains.
         max_cut_size: largest lightcut per shading point.
         clamp: VPL geometry clamp as a minimum distance, a fraction of the scene's bounding

@@ -9,3 +9,9 @@ from numpy.typing import NDArray
 def dot(a: NDArray, b: NDArray) -> NDArray:
     """Row-wise dot product of (N, 3) arrays → (N,)."""
     return np.einsum("ij,ij->i", a, b)
+
+
+def normalize(v: NDArray) -> tuple[NDArray, NDArray]:
+    """(unit rows, (N,) lengths) of (N, 3) ``v``; zero rows stay zero."""
+    length = np.linalg.norm(v, axis=1)
+    return v / np.maximum(length, 1e-300)[:, None], length

@@ -24,3 +24,16 @@ def test_take_rows_rejects_bad_indices_like_numpy():
         take_rows(a, np.ones(9, bool))   # np.compress would silently truncate
     with pytest.raises(IndexError):
         take_rows(a, [10])
+
+
+def test_vecmath_dot_and_normalize():
+    from ercuts_core.vecmath import dot, normalize
+
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
+    np.testing.assert_allclose(dot(a, b), (a * b).sum(axis=1), rtol=1e-14)
+    v = np.vstack([a, np.zeros((1, 3))])
+    unit, length = normalize(v)
+    np.testing.assert_allclose(length[:-1], np.sqrt((a * a).sum(axis=1)), rtol=1e-14)
+    np.testing.assert_allclose(np.linalg.norm(unit[:-1], axis=1), 1.0, rtol=1e-14)
+    assert length[-1] == 0 and (unit[-1] == 0).all()          # a zero row stays zero

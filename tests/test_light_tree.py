@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest, chisquare
 
-from ercuts_core.integrators.ercuts.light_tree import LightTree, build_light_tree, cone_union, luminance
+from ercuts_core.integrators.ercuts.light_tree import LightTree, build_light_tree, cone_union
+from ercuts_core.sampling import luminance
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

@@ -6,9 +6,17 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ercuts_core.integrators.ercuts.light_tree import build_light_tree, luminance
-from ercuts_core.integrators.ercuts.lightcuts import (ShadingPoints, brute_force, cluster_bound, cosine_bound,
-                                   evaluate_lights, geometry_bound, lightcut)
+from ercuts_core.integrators.ercuts.light_tree import build_light_tree
+from ercuts_core.integrators.ercuts.lightcuts import (
+    ShadingPoints,
+    brute_force,
+    cluster_bound,
+    cosine_bound,
+    evaluate_lights,
+    geometry_bound,
+    lightcut,
+)
+from ercuts_core.sampling import luminance
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

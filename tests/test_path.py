@@ -32,13 +32,15 @@ def test_russian_roulette_is_unbiased_in_the_furnace():
     assert abs(r.image[..., :3].mean() - 1.0) < 0.025 and r.stats["nonfinite_samples"] == 0
 
 
-def test_same_seed_same_image_and_no_nonfinite():
-    s = RenderSettings(integrator="PATH", samples=2, seed=5)
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT"])
+def test_same_seed_same_image_and_no_nonfinite(integrator):
+    s = RenderSettings(integrator=integrator, samples=2, seed=5)
     a, b = render(point_lit_box(), s), render(point_lit_box(), s)
     c = render(point_lit_box(), s.replace(seed=6))
     np.testing.assert_array_equal(a.image, b.image)
     assert not np.array_equal(a.image, c.image)
-    assert a.stats["nonfinite_samples"] == 0 and a.image[..., :3].mean() > 0
+    for r in (a, b, c):
+        assert r.stats["nonfinite_samples"] == 0 and r.image[..., :3].mean() > 0
 
 
 def test_progress_false_cancels_and_returns_partial_image():

@@ -3,7 +3,7 @@
 * progress messages start with the phase name and the fraction rises monotonically over
   the whole render, phases in the algorithm's order;
 * preview images have the layout of ``RenderResult.image`` and are rate-limited by
-  ``render.PREVIEW_INTERVAL``;
+  ``integrators.base.PREVIEW_INTERVAL``;
 * cancelling in any phase returns the partial image — never a black one — whose light
   passes still sum to it;
 * ``report_dict`` survives ``json.dumps(..., allow_nan=False)``.

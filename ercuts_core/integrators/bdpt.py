@@ -127,19 +127,16 @@ class LightSample:
     light: NDArray
 
 
-@dataclass
 class Connection:
     """A group of R sampled paths (unoccluded, MIS-weighted contribution w·C ≠ 0) of one
     batch: lane, s and t (R,) each; ``e`` (R,) Y(w·C) in image units (t = 1 rows divided by
     the number of window pixels, as their splats are, so Σe estimates the image energy);
     ``light_sample`` for s = 1 rows, ``raster`` (R, 2) for t = 1 rows."""
 
-    lane: NDArray
-    s: NDArray
-    t: NDArray
-    e: NDArray
-    light_sample: LightSample | None = None
-    raster: NDArray | None = None
+    def __init__(self, lane: NDArray, s: NDArray, t: NDArray, e: NDArray,
+                 light_sample: LightSample | None = None, raster: NDArray | None = None):
+        self.lane, self.s, self.t, self.e = lane, s, t, e
+        self.light_sample, self.raster = light_sample, raster
 
 
 class VertexRows:

@@ -140,7 +140,7 @@ def test_background_prints_one_line_per_phase(tmp_path, capsys):
 
 
 def test_progressive_preview_is_shown(tmp_path, monkeypatch):
-    core_render = importlib.import_module("ercuts_core.render")
+    core_render = importlib.import_module("ercuts_core.integrators.base")   # the clock's module
     monkeypatch.setattr(core_render, "PREVIEW_INTERVAL", 0.0)
     shown = []
     show = framebuffer.show_preview

@@ -87,7 +87,7 @@ from .er_sampling import chain_starts, run_chains
 from .gather import Gather, Gathered, per_pixel, per_pixel_parts
 from .initialization import indirect_energy, rough_image_energy, seeds_from_path_tracer
 from .light_tree import build_light_tree
-from .mutations import NAMES, MutationContext
+from .mutations import INACTIVE, NAMES, MutationContext
 from .pacing import Schedule
 from .paths import PathBatch
 from .seeding import seed_paths
@@ -383,6 +383,8 @@ class ErcutsIntegrator:
         stats["vpls_after_merge"] = int((chains.count > 0).sum())
         stats["nan_acceptances"] = chains.nan_acceptances
         for i, name in enumerate(NAMES):
+            if name in INACTIVE:
+                continue
             stats[f"proposed_{name}"] = int(chains.proposed[i])
             stats[f"accepted_{name}"] = int(chains.accepted[i])
             stats[f"acceptance_{name}"] = float(chains.accepted[i] / chains.proposed[i]) if chains.proposed[i] else 0.0

@@ -39,8 +39,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-#: Rec.709 luminance weights (Blender colours are linear Rec.709).
-LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+from ...sampling import LUMINANCE_WEIGHTS
+from ...vecmath import normalize
+
 #: Relative luminance added in the pairing weight so that Y = 0 pairs rank by distance.
 _Y_EPS = 1e-9
 #: Cluster count from which the K-nearest-neighbour queries use all cores.
@@ -62,7 +63,14 @@ def _poll(keep_going, fraction: float) -> None:
 
 
 def luminance(rgb: NDArray) -> NDArray:
-    """Luminance of (..., 3) linear Rec.709 RGB → (...,)."""
+    """Y of (..., 3) linear Rec.709 RGB as the light tree and lightcuts round it: the matrix
+    product with :data:`~ercuts_core.sampling.LUMINANCE_WEIGHTS`.
+
+    :func:`ercuts_core.sampling.luminance` sums the same products in another order; the
+    last-bit differences flip a few tree pairings (measured with
+    ``benchmarks/same_image.py``: S-corridor pixels up to 10 % apart at the same seed), so
+    the tree keeps this form until an intended image change merges the two.
+    """
     return np.asarray(rgb, dtype=np.float64) @ LUMINANCE_WEIGHTS
 
 
@@ -165,12 +173,7 @@ def cone_union(axis_a: NDArray, cos_a: NDArray, axis_b: NDArray, cos_b: NDArray,
         ln = np.linalg.norm(mean, axis=1)
         mean = np.where(ln[:, None] > 1e-12, mean / np.maximum(ln, 1e-300)[:, None], axis_a)
         axis = np.where(sphere[:, None], mean, axis)
-    return _normalize(axis), cos
-
-
-def _normalize(v: NDArray) -> NDArray:
-    ln = np.linalg.norm(v, axis=1, keepdims=True)
-    return v / np.where(ln > 0, ln, 1.0)
+    return normalize(axis)[0], cos
 
 
 # -------------------------------------------------------------------------- matching

@@ -40,6 +40,10 @@ WORK = os.path.join(ROOT, "out", "references_work")
 #: Cycles samples per chunk (about a minute each on 2 cores).
 CHUNK_SPP = {"s_corridor": 2048, "cornell_box": 2048, "door_ajar": 1024, "baffled_lamp": 1024,
              "directly_lit": 2048}
+#: ``ERCUTS_QUICK=1`` (README): a smoke run — at most QUICK_ROUNDS chunks of QUICK_SPP samples
+#: per scene, written to ``out/quick/references/`` (never over the stored references).
+QUICK = os.environ.get("ERCUTS_QUICK", "0") not in ("", "0")
+QUICK_ROUNDS, QUICK_SPP = 2, 4
 
 
 def ref_paths(name: str, width: int = 160, height: int = 120) -> tuple[str, str]:
@@ -90,6 +94,14 @@ def main(argv=None) -> int:
     ap.add_argument("--width", type=int, default=160)
     ap.add_argument("--height", type=int, default=120)
     args = ap.parse_args(argv)
+    if QUICK:
+        global REF_DIR, WORK
+        REF_DIR = os.path.join(ROOT, "out", "quick", "references")
+        WORK = os.path.join(REF_DIR, "work")
+        CHUNK_SPP.update((name, QUICK_SPP) for name in CHUNK_SPP)
+        args.rounds = min(args.rounds, QUICK_ROUNDS)
+        print(f"make_references: ERCUTS_QUICK: {args.rounds} chunks of {QUICK_SPP} spp per scene, "
+              f"written to {REF_DIR}", flush=True)
     os.makedirs(WORK, exist_ok=True)
     stop = None
     if args.until:

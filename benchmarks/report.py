@@ -36,7 +36,12 @@ sys.path[:0] = [ROOT, HERE]
 import metrics  # noqa: E402
 from make_references import ref_paths  # noqa: E402
 
-RESULTS = os.path.join(HERE, "results")
+#: ``ERCUTS_QUICK=1`` (README): a smoke run of the whole pipeline — every budget capped at
+#: QUICK_BUDGET, one seed, no extra budgets — whose runs and report go to ``out/quick/benchmarks/``,
+#: never over the stored results.
+QUICK = os.environ.get("ERCUTS_QUICK", "0") not in ("", "0")
+QUICK_BUDGET = 1.0
+RESULTS = os.path.join(ROOT, "out", "quick", "benchmarks") if QUICK else os.path.join(HERE, "results")
 RUNS = os.path.join(RESULTS, "runs")
 ENGINES = ("ERCUTS", "BDPT", "PATH", "CYCLES")
 #: Scene → (kind, one-line description). 'indirect' scenes carry the ≤ 0.5× targets,
@@ -156,7 +161,8 @@ def warm_up(engines, w: int, h: int) -> None:
         cycles_runner.render_fixed("cornell_box", 4, 99, 40, 30)
 
 
-def run_all(args) -> None:
+def run_all(args) -> int:
+    """Render the runs of the plan that are not stored yet; the number that failed."""
     jobs = plan(args)
     todo = [j for j in jobs if not os.path.exists(run_path(*j) + ".json")]
     overhead = 1.5  # s per render: scene build/load, EXR round trip
@@ -165,17 +171,20 @@ def run_all(args) -> None:
           f"{len(todo)} to render ≈ {planned / 60:.1f} min (budgets + ~{overhead:.1f} s overhead "
           "each, Cycles calibration)", flush=True)
     if not todo or args.dry_run:
-        return
+        return 0
     warm_up(args.engines, args.width, args.height)
     t_start = time.perf_counter()
+    failures = 0
     for i, (s, e, b, k) in enumerate(todo):
         rec = render_one(s, e, b, k, args.width, args.height)
+        failures += "error" in rec
         extra = f", {rec['samples']} spp{' (capped, estimate)' if rec.get('capped') else ''}" \
             if e == "CYCLES" and "error" not in rec else ""
         if "error" in rec:
             extra = f", FAILED: {rec['error']}"
         print(f"report: [{i + 1}/{len(todo)}] {s} {e} {b:g} s seed {k}: wall {rec['wall']:.1f} s{extra} "
               f"(elapsed {(time.perf_counter() - t_start) / 60:.1f} min)", flush=True)
+    return failures
 
 
 # --------------------------------------------------------------------------- evaluation
@@ -723,17 +732,26 @@ def main(argv=None) -> int:
     ap.add_argument("--lightcuts", action="store_true",
                     help="also rerun benchmarks/bench_lightcuts.py (minutes) before the report")
     args = ap.parse_args(argv)
+    if QUICK:
+        args.budgets = sorted({min(b, QUICK_BUDGET) for b in args.budgets})
+        args.seeds, args.extra = min(args.seeds, 1), []
+        print(f"report: ERCUTS_QUICK: budgets {args.budgets} s, 1 seed, runs and report in {RESULTS}",
+              flush=True)
+    failures = 0
     if not args.report_only:
         missing = [s for s in args.scenes if not os.path.exists(ref_paths(s, args.width, args.height)[0])]
         if missing:
             print(f"report: no Cycles reference for {missing}: run benchmarks/make_references.py "
                   "(those scenes are rendered but left out of the report)", flush=True)
-        run_all(args)
+        failures = run_all(args)
         if args.dry_run:
             return 0
         if args.lightcuts:
             subprocess.run([sys.executable, os.path.join(HERE, "bench_lightcuts.py")], check=True)
     print(f"report: wrote {write_report(args)}")
+    if failures:
+        print(f"report: {failures} render(s) failed (listed in the report)", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -29,7 +29,11 @@ fi
 stamp="$venv/.requirements.sha256"
 want="$(sha256sum "$root/requirements.txt" | cut -d' ' -f1)"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+  n="$(grep -cE '^[[:space:]]*[^#[:space:]]' "$root/requirements.txt")"
+  echo "setup: installing requirements.txt ($n packages) into .venv" \
+       "(first run ≈ 1 min, 1.3 GB, most of it bpy)…"
   "$venv/bin/python" -m pip install -q --upgrade pip
-  "$venv/bin/python" -m pip install -q -r "$root/requirements.txt"
+  "$venv/bin/python" -m pip install --progress-bar on -r "$root/requirements.txt"
+  echo "setup: .venv ready"
   echo "$want" > "$stamp"
 fi

@@ -10,8 +10,6 @@ core's frozen dataclass.
 """
 from __future__ import annotations
 
-import os
-
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
 
@@ -52,18 +50,6 @@ DIRECT_LIGHT_ITEMS = (
     ("VPL", "Virtual Point Lights", "Direct light from area lights and emissive meshes through "
      "virtual point lights on the lights, as in the paper", 1),
 )
-
-
-#: ``ERCUTS_QUICK=1`` (README: smoke runs of the documented commands) caps every render's time
-#: limit at this many seconds; unset, empty or ``0`` leaves the settings alone.
-QUICK_TIME_LIMIT = 3.0
-
-
-def quick_time_limit(limit: float) -> float:
-    """``limit`` (seconds, 0 = none), capped at :data:`QUICK_TIME_LIMIT` under ``ERCUTS_QUICK``."""
-    if os.environ.get("ERCUTS_QUICK", "0") in ("", "0"):
-        return limit
-    return min(limit, QUICK_TIME_LIMIT) if limit > 0 else QUICK_TIME_LIMIT
 
 
 def _core_defaults() -> dict:
@@ -308,7 +294,7 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
 
     def to_core(self, **overrides):
         """The equivalent ``ercuts_core.settings.RenderSettings`` (``overrides`` win)."""
-        from ercuts_core.settings import RenderSettings
+        from ercuts_core.settings import RenderSettings, quick_time_limit
 
         values = {name: getattr(self, name) for name in PROPERTY_NAMES}
         for name, value in values.items():
@@ -317,7 +303,7 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         render = self.id_data.render
         if values["threads"] == 0 and render.threads_mode == "FIXED":
             values["threads"] = int(render.threads)
-        values["time_limit"] = quick_time_limit(values["time_limit"])
+        values["time_limit"] = quick_time_limit(values["time_limit"])   # ERCUTS_QUICK (README)
         values.update(overrides)
         return RenderSettings.from_dict(values)
 

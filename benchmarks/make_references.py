@@ -33,6 +33,7 @@ sys.path[:0] = [ROOT, HERE]
 
 import cycles_runner  # noqa: E402
 from ercuts_core.image_io import atomic_path, write_exr  # noqa: E402
+from ercuts_core.settings import quick  # noqa: E402
 from metrics import EPS, relmse  # noqa: E402
 
 REF_DIR = os.path.join(ROOT, "blend_scenes", "references")
@@ -42,7 +43,7 @@ CHUNK_SPP = {"s_corridor": 2048, "cornell_box": 2048, "door_ajar": 1024, "baffle
              "directly_lit": 2048}
 #: ``ERCUTS_QUICK=1`` (README): a smoke run — at most QUICK_ROUNDS chunks of QUICK_SPP samples
 #: per scene, written to ``out/quick/references/`` (never over the stored references).
-QUICK = os.environ.get("ERCUTS_QUICK", "0") not in ("", "0")
+QUICK = quick()
 QUICK_ROUNDS, QUICK_SPP = 2, 4
 
 

@@ -34,12 +34,13 @@ ROOT = os.path.dirname(HERE)
 sys.path[:0] = [ROOT, HERE]
 
 import metrics  # noqa: E402
+from ercuts_core.settings import quick  # noqa: E402
 from make_references import ref_paths  # noqa: E402
 
 #: ``ERCUTS_QUICK=1`` (README): a smoke run of the whole pipeline — every budget capped at
 #: QUICK_BUDGET, one seed, no extra budgets — whose runs and report go to ``out/quick/benchmarks/``,
 #: never over the stored results.
-QUICK = os.environ.get("ERCUTS_QUICK", "0") not in ("", "0")
+QUICK = quick()
 QUICK_BUDGET = 1.0
 RESULTS = os.path.join(ROOT, "out", "quick", "benchmarks") if QUICK else os.path.join(HERE, "results")
 RUNS = os.path.join(RESULTS, "runs")

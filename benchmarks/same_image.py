@@ -70,10 +70,26 @@ def base_images(rev: str, root: str) -> dict[str, np.ndarray]:
             subprocess.run(["git", "-C", root, "worktree", "remove", "--force", tree], check=False)
 
 
+def stats_changes(base: dict, new: dict) -> tuple[list[str], list[str]]:
+    """(statistics whose values differ, statistics present on one side only), as
+    ``case/name``; statistics are compared by name, so an added or removed one is reported
+    on its own and does not hide the others."""
+    differ, one_side = [], []
+    for key in sorted(k for k in set(base) | set(new) if k.endswith("/stats")):
+        case = key[: -len("/stats")]
+        a = dict(zip(base.get(f"{case}/stats_keys", []), base.get(key, [])))
+        b = dict(zip(new.get(f"{case}/stats_keys", []), new.get(key, [])))
+        one_side += [f"{case}/{k}" for k in sorted(set(a) ^ set(b))]
+        differ += [f"{case}/{k}" for k in sorted(set(a) & set(b))
+                   if not np.array_equal(a[k], b[k], equal_nan=True)]
+    return differ, one_side
+
+
 def compare(base: dict, new: dict) -> list[str]:
-    """Names of the arrays that are not bit-identical (missing on either side included)."""
+    """Names of the images and AOVs that are not bit-identical (missing on either side
+    included); statistics: :func:`stats_changes`."""
     bad = []
-    for key in sorted(set(base) | set(new)):
+    for key in sorted(k for k in set(base) | set(new) if "/stats" not in k):
         a, b = base.get(key), new.get(key)
         if a is None or b is None or a.shape != b.shape or a.dtype != b.dtype \
                 or not np.array_equal(a, b, equal_nan=a.dtype.kind == "f"):
@@ -92,12 +108,18 @@ def main(argv: list[str] | None = None) -> int:
         np.savez(args.save, **new)
     if not args.base:
         return 0
-    bad = compare(base_images(args.base, args.root), new)
-    n_cases = len(CASES)
-    if bad:
-        print(f"DIFFERENT: {len(bad)} arrays differ, first: {bad[:5]}")
+    base = base_images(args.base, args.root)
+    bad = compare(base, new)
+    differ, one_side = stats_changes(base, new)
+    n_arrays = sum("/stats" not in k for k in new)
+    if one_side:
+        print(f"statistics on one side only (added or removed): {one_side}")
+    if bad or differ:
+        print(f"DIFFERENT: {len(bad)} images/AOVs differ, first: {bad[:5]}; "
+              f"{len(differ)} statistics differ, first: {differ[:5]}")
         return 1
-    print(f"identical: {len(new)} arrays of {n_cases} cases bit for bit (base {args.base})")
+    print(f"identical: {n_arrays} images and AOVs of {len(CASES)} cases bit for bit, and every "
+          f"statistic both sides have (base {args.base})")
     return 0
 
 

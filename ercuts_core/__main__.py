@@ -19,7 +19,7 @@ from .description import load_npz, save_npz
 from .image_io import write_exr, write_png
 from .render import render
 from .scenes import SCENES
-from .settings import RenderSettings
+from .settings import RenderSettings, quick_time_limit
 from .validate import SceneError
 
 
@@ -52,17 +52,10 @@ def _progress_bar():
     return bar, progress
 
 
-def _time_limit(limit: float) -> float:
-    """``ERCUTS_QUICK=1`` (README: smoke runs of the documented commands) caps it at 3 s."""
-    if os.environ.get("ERCUTS_QUICK", "0") in ("", "0"):
-        return limit
-    return min(limit, 3.0) if limit > 0 else 3.0
-
-
 def cmd_render(args) -> int:
     desc = _load(args.scene, args.width, args.height)
     settings = RenderSettings(integrator=args.integrator, samples=args.samples, seed=args.seed,
-                              max_depth=args.max_depth, time_limit=_time_limit(args.time_limit))
+                              max_depth=args.max_depth, time_limit=quick_time_limit(args.time_limit))
     bar, progress = _progress_bar()
     t0 = time.perf_counter()
     try:

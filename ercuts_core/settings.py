@@ -7,6 +7,7 @@ keys, like pbrt-v4's ``ReportUnused``.
 from __future__ import annotations
 
 import dataclasses
+import os
 from dataclasses import dataclass, fields
 
 INTEGRATORS = ("ERCUTS", "BDPT", "PATH")
@@ -15,6 +16,24 @@ SEEDINGS = ("BDPT", "PATH")
 DIRECT_LIGHTS = ("NEE", "VPL")
 LIGHTCUT_ERRORS = ("NODE", "TOTAL", "LITERAL")
 TREE_PAIRINGS = ("PLOC", "GREEDY")
+
+
+#: ``ERCUTS_QUICK=1`` (README: smoke runs of the documented commands) caps every render's
+#: time limit at this many seconds (:func:`quick_time_limit`).
+QUICK_TIME_LIMIT = 3.0
+
+
+def quick() -> bool:
+    """``ERCUTS_QUICK`` is set to something other than empty or ``0``."""
+    return os.environ.get("ERCUTS_QUICK", "0") not in ("", "0")
+
+
+def quick_time_limit(limit: float) -> float:
+    """``limit`` (seconds, 0 = none), capped at :data:`QUICK_TIME_LIMIT` under ``ERCUTS_QUICK``
+    (the add-on and the command line apply it to every render they start)."""
+    if not quick():
+        return limit
+    return min(limit, QUICK_TIME_LIMIT) if limit > 0 else QUICK_TIME_LIMIT
 
 
 @dataclass(frozen=True)

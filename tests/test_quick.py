@@ -16,7 +16,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 @pytest.mark.parametrize("value, limit, expected", [
     (None, 0.0, 0.0), ("0", 30.0, 30.0), ("1", 0.0, 3.0), ("1", 30.0, 3.0), ("1", 2.0, 2.0)])
 def test_quick_caps_the_core_command_line(monkeypatch, value, limit, expected):
-    from ercuts_core.__main__ import _time_limit
+    from ercuts_core.settings import quick_time_limit as _time_limit
 
     if value is None:
         monkeypatch.delenv("ERCUTS_QUICK", raising=False)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import pytest
 
-from addon import properties
 
 
 @pytest.mark.parametrize("value, limit, expected", [
@@ -18,4 +17,6 @@ def test_quick_caps_the_time_limit(fresh_scene, monkeypatch, value, limit, expec
         monkeypatch.setenv("ERCUTS_QUICK", value)
     fresh_scene.ercuts.time_limit = limit
     assert fresh_scene.ercuts.to_core().time_limit == pytest.approx(expected)
-    assert properties.QUICK_TIME_LIMIT == 3.0
+    from ercuts_core.settings import QUICK_TIME_LIMIT
+
+    assert QUICK_TIME_LIMIT == 3.0

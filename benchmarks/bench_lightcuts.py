@@ -157,7 +157,7 @@ def variants(n: int, pts: ShadingPoints, n_brute: int) -> list[tuple[str, float,
 
 def write_table(rows: list[Row], var: list, n_var: int, n_pts: int, n_brute: int) -> str:
     lines = [
-        "# Lightcuts scaling (ercuts_core.light_tree + ercuts_core.lightcuts)",
+        "# Lightcuts scaling (ercuts_core.integrators.ercuts: light_tree + lightcuts)",
         "",
         f"Box room 4×4×3 m, VPLs on walls + ceiling, {n_pts} diffuse floor points, an "
         "analytic pillar occluder; max_error = 2 %, max_cut_size = 1000, "

@@ -56,7 +56,7 @@ OUT = os.path.join(ROOT, "benchmarks", "results")
 PROFILES = os.path.join(OUT, "profiles")
 #: ErcutsIntegrator methods (and the functions they call) → phase key of result.timings.
 PHASE_OF_FUNCTION = {
-    "_rough_bdpt": "bdpt", "_direct_passes": "direct", "build_gbuffer": "seeds",
+    "_rough_bdpt": "bdpt", "_direct_light": "direct", "build_gbuffer": "seeds",
     "_direct_image": "seeds", "_seeds": "seeds", "run_chains": "chains", "make_vpls": "vpls", "_gather": "cuts",
 }
 ERCUTS_PHASES = ("bdpt", "direct", "seeds", "chains", "vpls", "tree", "cuts")
@@ -93,7 +93,7 @@ REMAINING = [
     "above 5 % by internal time.",
     "ERCUTS gather (the slowest phase): the Lightcuts bounds (cluster_bound/cosine_bound) and the "
     "per-round `_select` sort and luminance of every active entry; the shading callbacks in "
-    "integrators/ercuts.py still use fancy indexing (`wo[k]`, `p[k]`) — take_rows would help there.",
+    "integrators/ercuts/gather.py still use fancy indexing (`wo[k]`, `p[k]`) — take_rows would help there.",
     "E1 light tracing: embreex ~25 %, the tracer wrapper (float32 conversion, thread split, hit "
     "decoding) another ~10 %; cosine sampling (sin/cos) ~5 %.",
     "Rough BDPT and chains: `_random_walk` and the connection code (bdpt.py); einsum dots dominate.",

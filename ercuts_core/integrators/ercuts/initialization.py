@@ -44,7 +44,7 @@ def seeds_from_path_tracer(scene: BuiltScene, max_depth: int, rng: np.random.Gen
 
     Returns:
         (S paths, (S,) energies e = Y(w·C) in pixel units); target-class paths only
-        (:func:`~ercuts_core.paths.is_target` with ``direct``).
+        (:func:`.paths.is_target` with ``direct``).
     """
     cam, tracer = scene.camera, scene.tracer
     w = cam.window

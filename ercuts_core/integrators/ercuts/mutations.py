@@ -2,7 +2,7 @@
 
 Each mutation proposes y from x and returns ``ratio = T(x|y) / T(y|x)`` so that the
 acceptance of the paper's eq. (1) is ``a = min(1, f(y)·ratio / f(x))`` [Veach & Guibas 1997].
-All of them work in the measure of :mod:`ercuts_core.paths` (raster position of x1, then
+All of them work in the measure of :mod:`.paths` (raster position of x1, then
 area/counting/solid-angle measures for x2 … x_k).
 
 * **Lens perturbation** [Veach 1997 §11.4.3; Mitsuba ``mut_lens.cpp``]: move the raster

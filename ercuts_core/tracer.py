@@ -11,7 +11,11 @@ embreex semantics this module relies on (see shared docs, algorithm.md §F):
 
 Offsets follow pbrt/Mitsuba's error-bound idea: the origin moves along the geometric
 normal by ``eps = max(1e-4·scene_diagonal·2^-7, 64·2^-23·max|p|)``, enough for float32
-positions at 1e4 m. Hit positions are recomputed from barycentrics in float64.
+positions at 1e4 m, and also by ``eps`` along the ray (Mitsuba's ray ``mint``, which
+embreex cannot set): a point on an edge shared with another surface — a room's corner,
+hit exactly by a camera ray through a pixel centre — is on that surface's plane too, and
+the normal offset alone leaves it there, where every ray into the room hits it at t = 0.
+Hit positions are recomputed from barycentrics in float64.
 
 Batches are split across threads (embreex ≥ 4.4 releases the GIL while tracing).
 """
@@ -86,7 +90,8 @@ class Tracer:
         return np.maximum(self.eps_abs, 64.0 * _F32_ULP * np.maximum(np.maximum(a[:, 0], a[:, 1]), a[:, 2]))
 
     def offset(self, p: NDArray, ng: NDArray, d: NDArray) -> NDArray:
-        """Move surface points ``p`` off their surface toward the side ``d`` points to.
+        """Move surface points ``p`` off their surface toward the side ``d`` points to, and
+        ``epsilon`` along ``d``, off any other surface through ``p`` (a shared edge).
 
         Args:
             p: (N, 3) float64 points on triangles.
@@ -96,7 +101,8 @@ class Tracer:
             (N, 3) float64 ray origins.
         """
         side = np.where(np.einsum("ij,ij->i", ng, d) >= 0.0, 1.0, -1.0)
-        return p + (side * self.epsilon(p))[:, None] * ng
+        eps = self.epsilon(p)[:, None]
+        return p + eps * (side[:, None] * ng + d)
 
     # ------------------------------------------------------------------ queries
     def _split(self, n: int):

@@ -72,3 +72,43 @@ def test_large_batches_are_split_across_threads_consistently():
     expect = (np.abs(o[:, 0]) < 1) & (np.abs(o[:, 2]) < 1)
     assert (hit.valid == expect).mean() > 0.9999
     assert tr.rays_traced == n
+
+
+def corner(center=0.0):
+    """A concave corner: a floor (y = c, normal +y) and a wall (x = c, normal +x) sharing the
+    edge x = y = c, z ∈ [c − 1, c + 1] (like a room's floor and wall, or the Cornell box's
+    ceiling and side walls)."""
+    c = center
+    pos = np.array([[c, c, c - 1], [c + 2, c, c - 1], [c + 2, c, c + 1], [c, c, c + 1],      # floor
+                    [c, c, c - 1], [c, c, c + 1], [c, c + 2, c + 1], [c, c + 2, c - 1]],     # wall
+                   np.float32)
+    tris = np.array([[0, 3, 2], [0, 2, 1], [4, 7, 6], [4, 6, 5]], np.int32)
+    return pos, tris
+
+
+@pytest.mark.parametrize("center", [0.0, 1.0, 100.0])
+def test_points_on_a_shared_concave_edge_see_the_room(center):
+    """A camera ray through a pixel centre that projects onto a room's corner hits the edge
+    two surfaces share: the hit point (from barycentrics, like ``BuiltScene.surface``) is on
+    both planes or a rounding error beyond one. Offset along its own normal only, it stayed
+    on the other plane, and every shadow ray into the room was blocked at t = 0 (Cornell
+    box: 29 black pixels along the ceiling corners). Such points must see the room, and
+    rays spawned from them must leave into it."""
+    c = center
+    pos, tris = corner(c)
+    tr = Tracer(pos, tris, threads=1)
+    rng = np.random.default_rng(3)
+    n = 4000
+    eye = np.c_[rng.uniform(0.3, 1.9, n) + c, rng.uniform(0.3, 1.9, n) + c, rng.uniform(-1, 1, n) + c]
+    edge = np.c_[np.full(n, c), np.full(n, c), rng.uniform(-0.9, 0.9, n) + c]
+    view = (edge - eye) / np.linalg.norm(edge - eye, axis=1, keepdims=True)
+    hit = tr.intersect(eye, view)
+    assert hit.valid.all()
+    v = pos[tris[hit.prim]].astype(np.float64)                                    # (n, 3, 3)
+    p = (1 - hit.u - hit.v)[:, None] * v[:, 0] + hit.u[:, None] * v[:, 1] + hit.v[:, None] * v[:, 2]
+    ng = np.where((hit.prim < 2)[:, None], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
+    assert np.abs(p - edge).max() < 1e-6 * max(1.0, c) and (hit.prim < 2).any() and (hit.prim >= 2).any()
+    q = np.c_[rng.uniform(0.05, 1.9, n) + c, rng.uniform(0.05, 1.9, n) + c, rng.uniform(-1, 1, n) + c]
+    assert tr.visible(p, ng, q, None).all()
+    d = (q - p) / np.linalg.norm(q - p, axis=1, keepdims=True)
+    assert not tr.intersect(tr.offset(p, ng, d), d).valid.any()  # nothing but open space

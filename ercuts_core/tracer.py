@@ -96,7 +96,7 @@ class Tracer:
         Args:
             p: (N, 3) float64 points on triangles.
             ng: (N, 3) unit geometric normals.
-            d: (N, 3) directions of the rays that leave ``p``.
+            d: (N, 3) unit directions of the rays that leave ``p``.
         Returns:
             (N, 3) float64 ray origins.
         """
@@ -170,6 +170,8 @@ class Tracer:
         neither hits the surfaces it starts and ends on nor skips thin blockers.
         """
         d = p1 - p0
+        length = np.sqrt(np.einsum("ij,ij->i", d, d))
+        d = d / np.where(length > 0, length, 1.0)[:, None]     # offset() moves eps along a unit d
         o0 = p0 if ng0 is None else self.offset(p0, ng0, d)
         o1 = p1 if ng1 is None else self.offset(p1, ng1, -d)
         seg = o1 - o0

@@ -112,3 +112,20 @@ def test_points_on_a_shared_concave_edge_see_the_room(center):
     assert tr.visible(p, ng, q, None).all()
     d = (q - p) / np.linalg.norm(q - p, axis=1, keepdims=True)
     assert not tr.intersect(tr.offset(p, ng, d), d).valid.any()  # nothing but open space
+
+
+@pytest.mark.parametrize("length", [1.0, 1e3, 1e5])
+def test_long_shadow_rays_keep_thin_blockers_near_their_ends(length):
+    """The offset along the ray is eps along a *unit* direction, whatever the segment's
+    length: a blocker 1 mm above a 2 m floor still blocks a shadow ray to a point
+    ``length`` away (an offset of eps·|p1 − p0| stepped over it from 1 km on). From the far
+    end the segment stops 1e-6 of its length short, so that direction is checked at 10 m."""
+    ground, tris = plane((0, 0, 0))
+    blocker = np.array([[-1, 1e-3, -1], [1, 1e-3, -1], [1, 1e-3, 1], [-1, 1e-3, 1]], np.float32) * [0.01, 1, 0.01]
+    tr = Tracer(np.vstack([ground, blocker]), np.vstack([tris, tris + 4]), threads=1)
+    p0 = np.array([[0.0, 0.0, 0.0]])
+    up = np.array([[0.0, 1.0, 0.0]])
+    far = p0 + [[0.0, length, 0.0]]
+    assert not tr.visible(p0, up, far, None)[0]
+    assert not tr.visible(p0 + [[0.0, 10.0, 0.0]], None, p0, up)[0]
+    assert tr.visible(p0 + [[0.05, 0, 0]], up, far + [[0.05, 0, 0]], None)[0]   # beside it: free

@@ -36,6 +36,14 @@ _F32_ULP = 2.0**-23
 _THREAD_MIN = 1 << 15
 
 
+def _f32(a) -> NDArray[np.float32]:
+    """``a`` as a contiguous float32 array for embreex. Values beyond float32's range occur
+    only in scenes that span ±3e38 m (a sun's emission disk around one lies outside it);
+    they become ±inf, and embree reports a miss for such a ray, the only possible answer."""
+    with np.errstate(over="ignore"):
+        return np.ascontiguousarray(a, np.float32)
+
+
 @dataclass
 class Hit:
     """Closest hits of a ray batch.
@@ -71,8 +79,14 @@ class Tracer:
         if self.n_triangles:
             TriangleMesh(self._scene, np.ascontiguousarray(positions, np.float32),
                          np.ascontiguousarray(triangles, np.int32))
-            lo, hi = positions.min(axis=0), positions.max(axis=0)
-            self.diagonal = float(np.linalg.norm(hi.astype(np.float64) - lo))
+            # Bounds of the vertices the triangles use: an unused vertex may be anywhere,
+            # even NaN/Inf (validate drops the triangles, not the vertices), and an infinite
+            # diagonal made every offset infinite.
+            used = np.zeros(len(positions), bool)
+            used[np.asarray(triangles).reshape(-1)] = True
+            p = np.asarray(positions)[used]
+            lo, hi = p.min(axis=0).astype(np.float64), p.max(axis=0).astype(np.float64)
+            self.diagonal = float(np.linalg.norm(hi - lo))
             # Commit the scene once, single-threaded (lazy commit is not thread-safe).
             self._scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))
         else:
@@ -127,10 +141,9 @@ class Tracer:
         v = np.zeros(n)
         if n == 0 or self.n_triangles == 0:
             return Hit(prim, t, u, v)
-        o32 = np.ascontiguousarray(o, np.float32)
+        o32 = _f32(o)
         d32 = np.ascontiguousarray(d, np.float32)
-        far = np.full(n, 1e30, np.float32) if tmax is None else \
-            np.ascontiguousarray(np.broadcast_to(tmax, (n,)), np.float32).copy()
+        far = np.full(n, 1e30, np.float32) if tmax is None else _f32(np.broadcast_to(tmax, (n,))).copy()
 
         def run(s: slice):
             res = self._scene.run(o32[s], d32[s], dists=far[s].copy(), output=True)
@@ -151,9 +164,9 @@ class Tracer:
         blocked = np.zeros(n, bool)
         if n == 0 or self.n_triangles == 0:
             return blocked
-        o32 = np.ascontiguousarray(o, np.float32)
+        o32 = _f32(o)
         d32 = np.ascontiguousarray(d, np.float32)
-        far = np.ascontiguousarray(np.broadcast_to(tmax, (n,)), np.float32).copy()
+        far = _f32(np.broadcast_to(tmax, (n,))).copy()
 
         def run(s: slice):
             blocked[s] = self._scene.run(o32[s], d32[s], dists=far[s].copy(), query="OCCLUDED") == 0

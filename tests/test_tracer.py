@@ -129,3 +129,25 @@ def test_long_shadow_rays_keep_thin_blockers_near_their_ends(length):
     assert not tr.visible(p0, up, far, None)[0]
     assert not tr.visible(p0 + [[0.0, 10.0, 0.0]], None, p0, up)[0]
     assert tr.visible(p0 + [[0.05, 0, 0]], up, far + [[0.05, 0, 0]], None)[0]   # beside it: free
+
+
+def test_unused_nonfinite_vertex_leaves_offsets_finite():
+    """validate drops the triangles of a NaN/Inf vertex but keeps the vertex: the offsets'
+    scene size comes from the vertices triangles use (an infinite one made every offset
+    infinite and every ray from a surface NaN)."""
+    pos, tris = plane((0, 0, 0))
+    tr = Tracer(np.vstack([pos, [[-np.inf, 0, 0], [np.nan, 1, 2]]]).astype(np.float32), tris, threads=1)
+    assert tr.diagonal == pytest.approx(np.sqrt(8.0))
+    p = np.array([[0.2, 0.0, 0.3]])
+    o = tr.offset(p, np.array([[0.0, 1.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+    assert np.isfinite(o).all() and 0 < o[0, 1] < 1e-4
+
+
+def test_origins_beyond_float32_range_miss_quietly():
+    """A scene spanning ±3e38 m puts e.g. a sun's emission disk beyond float32's range:
+    such rays miss, without an overflow warning (warnings are errors in the tests)."""
+    tr = Tracer(*plane((0, 0, 0)), threads=1)
+    o = np.array([[0.0, 4e38, 0.0], [0.0, 1.0, 0.0]])
+    d = np.array([[0.0, -1.0, 0.0], [0.0, -1.0, 0.0]])
+    assert list(tr.intersect(o, d).valid) == [False, True]
+    assert list(tr.occluded(o, d, np.array([5e38, 2.0]))) == [False, True]

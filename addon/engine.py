@@ -10,10 +10,19 @@ uncaught exception would only be printed, shared docs ``blender.md`` §0.6); the
 traceback goes to the console. Warnings are reported once per render.
 
 While the core runs, its ``preview`` callback (when the core has one) shows the image
-so far (``framebuffer.show_preview``); in background mode one line is printed per
-phase. The final image goes into Combined and the view layer's enabled passes
-(:mod:`.passes`, declared in ``update_render_passes``); optionally a JSON statistics
-file is written next to the frame (:mod:`.sidecar`). Preview thumbnails
+so far (``framebuffer.show_preview``). In background mode (``blender -b``) Blender prints
+a ``Fra:… | <stats>`` line for every ``update_stats`` call, so there the engine prints one
+line per phase and updates the stats at most every :data:`BACKGROUND_STATS_INTERVAL`
+seconds (the core reports several times a second; the details go to the JSON sidecar).
+
+A render that reaches its time limit ends normally. One stopped by Blender's break flag
+(Esc in the UI; Ctrl-C, i.e. SIGINT, in ``blender -b``) keeps its partial image in the UI,
+but in background mode it is an error (:meth:`ErcutsRenderEngine._is_batch`): nobody is
+watching, and the frame must not be saved as if it were complete.
+
+The final image goes into Combined and the view layer's enabled passes (:mod:`.passes`,
+declared in ``update_render_passes``); optionally a JSON statistics file is written next
+to the frame (:mod:`.sidecar`). Preview thumbnails
 (``is_preview``) use :func:`preview_settings`, without passes, border or statistics.
 The Rendered viewport (``view_update``/``view_draw``) lives in :mod:`.viewport`.
 """
@@ -33,6 +42,9 @@ last_render: dict = {}
 #: Material/world/light preview thumbnails: unidirectional path tracing (no chains,
 #: VPLs or light tree to build), few samples, shallow paths, at most 2 s.
 PREVIEW_LIMITS = dict(integrator="PATH", samples=8, max_depth=4, time_limit=2.0)
+
+#: Background mode: seconds between two stats updates (each prints a line) within a phase.
+BACKGROUND_STATS_INTERVAL = 5.0
 
 #: Phase names that start the core's progress messages: the Ercuts phases
 #: (``ercuts_core.integrators.ercuts.pacing.PHASES``, read by :func:`phases`) and the pass
@@ -75,6 +87,10 @@ def _accepts_preview(render_fn) -> bool:
         return False
 
 
+class RenderInterrupted(Exception):
+    """Blender's break flag stopped a background render: reported as an error."""
+
+
 def _format_time(seconds: float) -> str:
     minutes, secs = divmod(int(seconds), 60)
     return f"{minutes:02d}:{secs:02d}"
@@ -93,6 +109,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         self._stats_prefix = ""
         self._layer_name = ""
         self._phase = None
+        self._stats_time = -float("inf")
         self._user_cancelled = False
 
     # ------------------------------------------------------------------ entry point
@@ -101,6 +118,9 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         self._user_cancelled = False
         try:
             self._render(depsgraph)
+        except RenderInterrupted as exc:   # the reason is the message; no traceback
+            print(f"Ercuts: {exc}", flush=True)
+            self.report({"ERROR"}, f"Ercuts: {exc}")
         except Exception as exc:  # noqa: BLE001 - every failure must reach the user
             message = self._error_message(exc)
             print(f"Ercuts: render failed: {message}")
@@ -168,6 +188,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         self._layer_name = layer_name
         self._stats_prefix = f"{layer_name} | " if len(scene.view_layers) > 1 else ""
         self._phase = None
+        self._stats_time = -float("inf")
         self.update_stats("Ercuts", f"{self._stats_prefix}Exporting scene")
 
         try:
@@ -177,6 +198,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
                 use_border=False if self._is_preview() else None,
                 should_stop=self._should_stop)
         except ExportCancelled:
+            self._stop_if_batch("while exporting the scene")
             return
         desc = exported.description
 
@@ -198,6 +220,15 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         if not self._is_preview():
             self._report(scene, layer_name, exported, result, settings, images, missing,
                          elapsed, progressive=bool(kwargs))
+            if self._user_cancelled or getattr(result, "stopped_by", None) == "cancel":
+                self._stop_if_batch(f"after {elapsed:.1f} s, in phase {self._phase or '?'}")
+
+    def _stop_if_batch(self, when: str) -> None:
+        """The user (or Blender's break flag) stopped the render: an error in background mode."""
+        if self._is_batch():
+            raise RenderInterrupted(
+                f"render cancelled by Blender's break signal (Ctrl-C / SIGINT) {when}: "
+                "the image is incomplete and is not saved")
 
     def _report(self, scene, layer_name, exported, result, settings, images, missing,
                 elapsed, progressive):
@@ -206,6 +237,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         last_render.clear()
         last_render.update(
             settings=settings.to_dict(), warnings=warnings, cancelled=result.cancelled,
+            stopped_by=getattr(result, "stopped_by", None),
             export_seconds=exported.seconds, total_seconds=elapsed,
             summary=result.summary(), window=tuple(result.window),
             export_stats=dict(exported.stats), stats=dict(result.stats), passes=list(images),
@@ -224,7 +256,11 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
             for w in unique:
                 print(f"Ercuts warning: {w}")
             self.report({"WARNING"}, "Ercuts: " + "; ".join(unique))
-        if result.cancelled:
+        if result.cancelled and not self._user_cancelled and \
+                getattr(result, "stopped_by", "time_limit") == "time_limit":
+            limit = scene.ercuts.time_limit
+            print(f"Ercuts: time limit of {limit:g} s reached: {result.summary()}")
+        elif result.cancelled:
             print(f"Ercuts: render stopped early: {result.summary()}")
 
     @staticmethod
@@ -275,18 +311,25 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
     def _progress(self, fraction: float, message: str) -> bool:
         """Core progress callback: progress bar, stats line, cancel polling.
 
-        In background mode (``blender -b``) one line is printed per phase change.
+        In background mode (``blender -b``) one line is printed per phase change, and the
+        stats (a ``Fra:`` line each) are updated at most every
+        :data:`BACKGROUND_STATS_INTERVAL` seconds within a phase.
         """
         fraction = min(max(float(fraction), 0.0), 1.0)
         self.update_progress(fraction)
-        elapsed = time.monotonic() - self._start
-        self.update_stats("Ercuts", f"{self._stats_prefix}{message} | {_format_time(elapsed)}")
+        now = time.monotonic()
+        elapsed = now - self._start
         phase = phase_of(message)
+        background = bpy.app.background
         if phase != self._phase:
             self._phase = phase
-            if bpy.app.background:
+            if background:
                 print(f"Ercuts: {self._layer_name} | {phase} | "
                       f"{fraction:4.0%} | {_format_time(elapsed)}", flush=True)
+                self._stats_time = now          # that line says it: no stats line now
+        if not background or now - self._stats_time >= BACKGROUND_STATS_INTERVAL:
+            self.update_stats("Ercuts", f"{self._stats_prefix}{message} | {_format_time(elapsed)}")
+            self._stats_time = now
         if self._should_stop():
             self._user_cancelled = True
         return not self._user_cancelled
@@ -296,6 +339,11 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         :meth:`_should_stop`), so tests can take the thumbnail path headless, where Blender
         renders no previews."""
         return bool(self.is_preview)
+
+    def _is_batch(self) -> bool:
+        """True in background mode (``blender -b``, the bpy module), where a cancelled
+        render is an error; a Python-level hook, so tests can take the interactive path."""
+        return bool(bpy.app.background)
 
     def _should_stop(self) -> bool:
         """True when the user cancelled (Esc); a Python-level hook, so tests can stand in."""

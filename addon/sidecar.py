@@ -10,14 +10,14 @@ A layer report is the core's ``RenderResult.report_dict(settings)`` (settings, s
 per-phase timings, VPL and cut statistics, issues, cancelled, window) plus the
 add-on's export time, total time and warnings. Every view layer of the frame adds its
 report, and the file is rewritten atomically (temporary file + ``os.replace``) each
-time, so a reader never sees a half-written file.
+time, so a reader never sees a half-written file; it gets the permissions a plain ``open``
+would give (``0o666 & ~umask``), like the image.
 """
 from __future__ import annotations
 
 import json
 import math
 import os
-import tempfile
 
 import bpy
 
@@ -91,19 +91,16 @@ def _finite(value):
 
 
 def write_atomic(path: str, data: dict) -> None:
-    """Write ``data`` as strict JSON to ``path`` atomically (directories are created)."""
+    """Write ``data`` as strict JSON to ``path`` atomically, readable like the frame beside
+    it (the core's :mod:`ercuts_core.atomic`; directories are created)."""
+    from . import compat
+
+    compat.preload_embreex()        # before the core's first import (see compat)
+    from ercuts_core.atomic import atomic_open
+
     data = _finite(data)
-    directory = os.path.dirname(path) or "."
-    os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".ercuts-", suffix=".json.tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(data, f, indent=1, default=_plain, allow_nan=False)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_open(path, "w", encoding="utf-8") as f:
+        json.dump(data, f, indent=1, default=_plain, allow_nan=False)
 
 
 def add_layer(scene, frame: int, animation: bool, layer_name: str, report: dict,

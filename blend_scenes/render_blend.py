@@ -7,7 +7,8 @@
 Writes ``<out>.exr`` (scene-linear, 32-bit float) and ``<out>.png`` (through the file's
 view transform), and prints the time and the engine's statistics. Options override the
 file's ``scene.ercuts`` settings (``--samples``, ``--integrator``, ``--time-limit``, …).
-The exit status is non-zero when the render fails (e.g. no camera).
+The exit status is non-zero, and no file is written, when the render fails (e.g. no
+camera) or is interrupted (Ctrl-C); reaching the time limit is a normal end.
 """
 from __future__ import annotations
 
@@ -77,7 +78,10 @@ def main(argv=None) -> int:
 
     from addon.engine import last_render
 
-    print(f"render_blend: {args.blend} with {args.engine} in {elapsed:.2f} s -> {out}.exr, {out}.png")
+    used = args.engine
+    if args.engine == "ERCUTS" and last_render:
+        used = f"ERCUTS (integrator {last_render['settings']['integrator']})"
+    print(f"render_blend: {args.blend} with {used} in {elapsed:.2f} s -> {out}.exr, {out}.png")
     if args.engine == "ERCUTS" and last_render:
         print(f"render_blend: {last_render['summary']} | export {last_render['export_seconds']:.3f} s")
         for w in last_render["warnings"]:

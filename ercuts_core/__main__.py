@@ -1,11 +1,11 @@
-"""Command line: render an ``.npz`` scene (or a built-in scene) to EXR + PNG with a progress bar.
+"""Render a scene description (.npz) or a built-in scene to EXR + PNG, with a progress bar.
 
-Examples::
-
-    python -m ercuts_core render builtin:s_corridor -o out/s_corridor.exr --samples 64
-    python -m ercuts_core render bug_report.npz -o out/frame.exr --integrator PATH
-    python -m ercuts_core save-builtin cornell_box cornell.npz
+examples:
+  python -m ercuts_core render builtin:s_corridor -o out/s_corridor.exr --samples 64
+  python -m ercuts_core render bug_report.npz -o out/frame.exr --integrator PATH
+  python -m ercuts_core save-builtin cornell_box cornell.npz
 """
+# The module docstring is the --help text: plain text, no reStructuredText markup.
 from __future__ import annotations
 
 import argparse
@@ -90,21 +90,28 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m ercuts_core", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
-    r = sub.add_parser("render", help="render a scene to EXR (+ PNG preview)")
-    r.add_argument("scene", help="path to a .npz description, or builtin:NAME")
+    r = sub.add_parser("render", help="render a scene to EXR (+ PNG preview)",
+                       description="Render a scene to a linear EXR and an sRGB PNG preview; "
+                                   "print the timings and statistics.")
+    r.add_argument("scene", help=f"path to a .npz description, or builtin:NAME "
+                                 f"(NAME: {', '.join(sorted(SCENES))})")
     r.add_argument("-o", "--output", required=True, help="output .exr path")
     r.add_argument("--png", help="PNG preview path (default: beside the EXR)")
     defaults = RenderSettings()
-    r.add_argument("--integrator", default=defaults.integrator)
-    r.add_argument("--samples", type=int, default=defaults.samples)
-    r.add_argument("--seed", type=int, default=defaults.seed)
-    r.add_argument("--max-depth", type=int, default=defaults.max_depth)
+    r.add_argument("--integrator", default=defaults.integrator, choices=("ERCUTS", "BDPT", "PATH"),
+                   help="default: %(default)s")
+    r.add_argument("--samples", type=int, default=defaults.samples,
+                   help="samples per pixel (ERCUTS: of its rough BDPT image); default: %(default)s")
+    r.add_argument("--seed", type=int, default=defaults.seed, help="default: %(default)s")
+    r.add_argument("--max-depth", type=int, default=defaults.max_depth,
+                   help="scattering vertices per path; default: %(default)s")
     r.add_argument("--time-limit", type=float, default=0.0, help="seconds, 0 = none")
-    r.add_argument("--width", type=int)
-    r.add_argument("--height", type=int)
+    r.add_argument("--width", type=int, help="built-in scenes only: image width in pixels")
+    r.add_argument("--height", type=int, help="built-in scenes only: image height in pixels")
     r.add_argument("--stats", help="write settings, timings and statistics as JSON here")
     r.set_defaults(func=cmd_render)
-    s = sub.add_parser("save-builtin", help="save a built-in scene as .npz")
+    s = sub.add_parser("save-builtin", help="save a built-in scene as .npz",
+                       description="Save a built-in scene as one .npz scene description.")
     s.add_argument("name", choices=sorted(SCENES))
     s.add_argument("output")
     s.set_defaults(func=cmd_save_builtin)

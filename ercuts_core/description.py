@@ -20,11 +20,12 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import tempfile
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 from numpy.typing import NDArray
+
+from .atomic import atomic_path
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -355,7 +356,7 @@ def _from_array(cls, name: str, arr: np.ndarray):
 
 
 def save_npz(desc: SceneDescription, path: str | os.PathLike) -> None:
-    """Write ``desc`` to one ``.npz`` file, atomically (temp file + rename)."""
+    """Write ``desc`` to one ``.npz`` file, atomically (:mod:`ercuts_core.atomic`)."""
     data: dict[str, np.ndarray] = {
         "schema_version": np.array(desc.schema_version),
         "world_radiance": desc.world_radiance,
@@ -369,17 +370,8 @@ def save_npz(desc: SceneDescription, path: str | os.PathLike) -> None:
             value = getattr(obj, f.name)
             if value is not None:
                 data[f"{part}.{f.name}"] = _to_array(value)
-    path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(suffix=".npz", dir=directory)
-    os.close(fd)
-    try:
+    with atomic_path(path, ".npz") as tmp:  # the suffix: numpy appends .npz to other names
         np.savez_compressed(tmp, **data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def load_npz(path: str | os.PathLike) -> SceneDescription:

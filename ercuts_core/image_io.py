@@ -1,37 +1,17 @@
-"""Image output: linear EXR through OpenEXR, and an sRGB PNG preview; both written atomically.
-
-Atomic: the file is written next to its destination under a temporary name and renamed
-over it only once complete, so a failed or cancelled render never leaves a truncated
-file nor overwrites a good one with a partial one.
+"""Image output: linear EXR through OpenEXR, and an sRGB PNG preview; both written atomically
+(:mod:`ercuts_core.atomic`: a failed or cancelled render never leaves a truncated file nor
+overwrites a good one with a partial one; permissions as a plain ``open`` would give).
 """
 from __future__ import annotations
 
 import os
 import struct
-import tempfile
 import zlib
-from contextlib import contextmanager
 
 import numpy as np
 from numpy.typing import NDArray
 
-
-@contextmanager
-def atomic_path(path: str | os.PathLike, suffix: str):
-    """Yield a temporary path beside ``path``; rename it over ``path`` on success."""
-    path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path)) or "."
-    os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=suffix, dir=directory, prefix=".ercuts-")
-    os.close(fd)
-    try:
-        yield tmp
-        with open(tmp, "rb+") as fh:      # on disk before the rename makes it visible
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+from .atomic import atomic_path
 
 
 def write_exr(path: str | os.PathLike, rgba: NDArray, extra: dict[str, NDArray] | None = None) -> None:

@@ -88,6 +88,7 @@ def render(desc: SceneDescription, settings: RenderSettings | None = None,
         full_size=(scene.camera.width, scene.camera.height),
         timings=timings, stats=stats, issues=checked.issues,
         cancelled=clock.cancelled, aovs=film.aovs(),
+        stopped_by=clock.stop_reason(),
     )
 
 

@@ -32,6 +32,9 @@ class RenderResult:
         stats: counters, e.g. {'rays': .., 'samples': .., 'nonfinite_samples': ..}.
         issues: messages from validation and rendering (see :mod:`ercuts_core.validate`).
         cancelled: True when ``progress`` returned False or ``time_limit`` ran out.
+        stopped_by: why the render stopped early: None (it finished), 'time_limit' (the
+            time budget was used: a normal end) or 'cancel' (``progress`` returned False:
+            the user or the host interrupted it, so the image is incomplete).
         aovs: extra per-pixel float32 images with the same (h, w) as ``image``, top row
             first: 'depth' (h, w, 1), 'normal' and 'albedo' (h, w, 3) (first hit); the light
             passes 'emission', 'direct', 'indirect' (h, w, 3) (path classes 0, 1, ≥ 2
@@ -48,6 +51,7 @@ class RenderResult:
     issues: list = field(default_factory=list)
     cancelled: bool = False
     aovs: dict[str, NDArray[np.float32]] = field(default_factory=dict)
+    stopped_by: str | None = None
 
     def summary(self) -> str:
         """One line: time, samples, rays per second, issues."""
@@ -67,7 +71,9 @@ class RenderResult:
             f"{rays / 1e6:.2f} M rays ({rate / 1e6:.2f} M rays/s)",
             f"non-finite samples {int(st.get('nonfinite_samples', 0))}",
         ]
-        if self.cancelled:
+        if self.stopped_by == "time_limit":
+            parts.append("time limit reached")
+        elif self.cancelled:
             parts.append("CANCELLED")
         return " | ".join(parts)
 
@@ -78,8 +84,8 @@ class RenderResult:
             settings: the :class:`~ercuts_core.settings.RenderSettings` (or a dict of them)
                 the render used; recorded as given, with its seed.
         Returns:
-            {'settings', 'seed', 'window', 'full_size', 'cancelled', 'timings', 'vpl', 'cuts',
-            'stats', 'issues', 'summary'}: plain dicts, lists, str, int, float (non-finite
+            {'settings', 'seed', 'window', 'full_size', 'cancelled', 'stopped_by', 'timings',
+            'vpl', 'cuts', 'stats', 'issues', 'summary'}: plain dicts, lists, str, int, float (non-finite
             numbers become None), so ``json.dumps`` accepts it.
         """
         if dataclasses.is_dataclass(settings):
@@ -92,6 +98,7 @@ class RenderResult:
             "window": {"x0": x0, "y0": y0, "width": w, "height": h},
             "full_size": list(self.full_size),
             "cancelled": self.cancelled,
+            "stopped_by": self.stopped_by,
             "timings": self.timings,
             "vpl": {k: st[k] for k in VPL_KEYS if k in st},
             "cuts": {k: st[k] for k in CUT_KEYS if k in st},

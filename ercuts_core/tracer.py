@@ -11,7 +11,11 @@ embreex semantics this module relies on (see shared docs, algorithm.md §F):
 
 Offsets follow pbrt/Mitsuba's error-bound idea: the origin moves along the geometric
 normal by ``eps = max(1e-4·scene_diagonal·2^-7, 64·2^-23·max|p|)``, enough for float32
-positions at 1e4 m. Hit positions are recomputed from barycentrics in float64.
+positions at 1e4 m, and also by ``eps`` along the ray (Mitsuba's ray ``mint``, which
+embreex cannot set): a point on an edge shared with another surface — a room's corner,
+hit exactly by a camera ray through a pixel centre — is on that surface's plane too, and
+the normal offset alone leaves it there, where every ray into the room hits it at t = 0.
+Hit positions are recomputed from barycentrics in float64.
 
 Batches are split across threads (embreex ≥ 4.4 releases the GIL while tracing).
 """
@@ -32,6 +36,14 @@ from .vecmath import dot
 _F32_ULP = 2.0**-23
 #: Minimum batch size worth splitting over threads.
 _THREAD_MIN = 1 << 15
+
+
+def _f32(a) -> NDArray[np.float32]:
+    """``a`` as a contiguous float32 array for embreex. Values beyond float32's range occur
+    only in scenes that span ±3e38 m (a sun's emission disk around one lies outside it);
+    they become ±inf, and embree reports a miss for such a ray, the only possible answer."""
+    with np.errstate(over="ignore"):
+        return np.ascontiguousarray(a, np.float32)
 
 
 @dataclass
@@ -69,8 +81,14 @@ class Tracer:
         if self.n_triangles:
             TriangleMesh(self._scene, np.ascontiguousarray(positions, np.float32),
                          np.ascontiguousarray(triangles, np.int32))
-            lo, hi = positions.min(axis=0), positions.max(axis=0)
-            self.diagonal = float(np.linalg.norm(hi.astype(np.float64) - lo))
+            # Bounds of the vertices the triangles use: an unused vertex may be anywhere,
+            # even NaN/Inf (validate drops the triangles, not the vertices), and an infinite
+            # diagonal made every offset infinite.
+            used = np.zeros(len(positions), bool)
+            used[np.asarray(triangles).reshape(-1)] = True
+            p = np.asarray(positions)[used]
+            lo, hi = p.min(axis=0).astype(np.float64), p.max(axis=0).astype(np.float64)
+            self.diagonal = float(np.linalg.norm(hi - lo))
             # Commit the scene once, single-threaded (lazy commit is not thread-safe).
             self._scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))
         else:
@@ -88,17 +106,19 @@ class Tracer:
         return np.maximum(self.eps_abs, 64.0 * _F32_ULP * np.maximum(np.maximum(a[:, 0], a[:, 1]), a[:, 2]))
 
     def offset(self, p: NDArray, ng: NDArray, d: NDArray) -> NDArray:
-        """Move surface points ``p`` off their surface toward the side ``d`` points to.
+        """Move surface points ``p`` off their surface toward the side ``d`` points to, and
+        ``epsilon`` along ``d``, off any other surface through ``p`` (a shared edge).
 
         Args:
             p: (N, 3) float64 points on triangles.
             ng: (N, 3) unit geometric normals.
-            d: (N, 3) directions of the rays that leave ``p``.
+            d: (N, 3) unit directions of the rays that leave ``p``.
         Returns:
             (N, 3) float64 ray origins.
         """
         side = np.where(dot(ng, d) >= 0.0, 1.0, -1.0)
-        return p + (side * self.epsilon(p))[:, None] * ng
+        eps = self.epsilon(p)[:, None]
+        return p + eps * (side[:, None] * ng + d)
 
     # ------------------------------------------------------------------ queries
     def _split(self, n: int):
@@ -123,10 +143,9 @@ class Tracer:
         v = np.zeros(n)
         if n == 0 or self.n_triangles == 0:
             return Hit(prim, t, u, v)
-        o32 = np.ascontiguousarray(o, np.float32)
+        o32 = _f32(o)
         d32 = np.ascontiguousarray(d, np.float32)
-        far = np.full(n, 1e30, np.float32) if tmax is None else \
-            np.ascontiguousarray(np.broadcast_to(tmax, (n,)), np.float32).copy()
+        far = np.full(n, 1e30, np.float32) if tmax is None else _f32(np.broadcast_to(tmax, (n,))).copy()
 
         def run(s: slice):
             res = self._scene.run(o32[s], d32[s], dists=far[s].copy(), output=True)
@@ -147,9 +166,9 @@ class Tracer:
         blocked = np.zeros(n, bool)
         if n == 0 or self.n_triangles == 0:
             return blocked
-        o32 = np.ascontiguousarray(o, np.float32)
+        o32 = _f32(o)
         d32 = np.ascontiguousarray(d, np.float32)
-        far = np.ascontiguousarray(np.broadcast_to(tmax, (n,)), np.float32).copy()
+        far = _f32(np.broadcast_to(tmax, (n,))).copy()
 
         def run(s: slice):
             blocked[s] = self._scene.run(o32[s], d32[s], dists=far[s].copy(), query="OCCLUDED") == 0
@@ -166,6 +185,8 @@ class Tracer:
         neither hits the surfaces it starts and ends on nor skips thin blockers.
         """
         d = p1 - p0
+        length = np.sqrt(np.einsum("ij,ij->i", d, d))
+        d = d / np.where(length > 0, length, 1.0)[:, None]     # offset() moves eps along a unit d
         o0 = p0 if ng0 is None else self.offset(p0, ng0, d)
         o1 = p1 if ng1 is None else self.offset(p1, ng1, -d)
         seg = o1 - o0

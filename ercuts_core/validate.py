@@ -175,7 +175,8 @@ def _clean_lights(desc, issues, stats):
     pl, sl, al = desc.point_lights, desc.sun_lights, desc.area_lights
     ok = _finite_rows(desc, [pl.position, pl.intensity, pl.direction, pl.cos_half_angle, pl.blend],
                       pl.object_ids, "point/spot", issues)
-    on = ok & (luminance(np.maximum(pl.intensity, 0)) > 0)
+    # A spot with a zero cone (cos of the half-angle ≥ 1) emits nothing, like zero intensity.
+    on = ok & (luminance(np.maximum(pl.intensity, 0)) > 0) & (pl.cos_half_angle < 1.0)
     stats["dropped_zero_lights"] = int((ok & ~on).sum())
     pl = PointLights(pl.position[on], np.maximum(pl.intensity[on], 0), pl.direction[on],
                      pl.cos_half_angle[on], np.clip(pl.blend[on], 0, 1), pl.radius[on], pl.object_ids[on])

@@ -101,6 +101,17 @@ def test_zero_power_lights_are_dropped_silently():
     assert v.issues == [] and v.stats["dropped_zero_lights"] == 2 and len(v.desc.point_lights) == 1
 
 
+def test_zero_cone_spot_is_dropped_silently():
+    """A spot whose cone is closed (cos of the half-angle 1) emits nothing: dropped like a
+    zero-power light. Kept, it was the scene's only light, picked with probability 0 and
+    divided by 2π(1 − cos) = 0 (the fuzz test's 'divide by zero' warnings in lights.py)."""
+    d = scene(lights=False)
+    pl = PointLights([[0, 1, 0]] * 2, [[1, 1, 1]] * 2, [[0, -1, 0]] * 2, [1.0, 0.9], [0, 0], [0, 0], [2, 2])
+    v = sanitize(d.replace(point_lights=pl))
+    assert v.issues == [] and v.stats["dropped_zero_lights"] == 1
+    assert list(v.desc.point_lights.cos_half_angle) == [pytest.approx(0.9)]
+
+
 def test_nonfinite_light_warns_and_is_skipped():
     d = scene(lights=False)
     pl = PointLights([[0, np.nan, 0]], [[1, 1, 1]], [[0, -1, 0]], [-1], [0], [0], [2])

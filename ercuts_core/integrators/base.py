@@ -46,6 +46,8 @@ class Clock:
         self.preview = preview
         self.last_preview = -np.inf
         self.cancelled = False
+        #: Why the render stopped early: None, 'time_limit' or 'cancel' (progress returned False).
+        self.stopped_by: str | None = None
 
     def show(self, image: Callable[[], np.ndarray]) -> None:
         """Send ``image()`` to the preview callback unless one was sent less than
@@ -63,13 +65,22 @@ class Clock:
         self.poll(fraction, message)
         if self.expired():
             self.cancelled = True
+            self.stopped_by = self.stopped_by or "time_limit"
         return not self.cancelled
 
     def poll(self, fraction: float, message: str) -> bool:
         """Call the progress callback only (the deadline is the caller's business)."""
         if self.progress is not None and self.progress(float(fraction), message) is False:
-            self.cancelled = True
+            self.cancelled, self.stopped_by = True, "cancel"
         return not self.cancelled
+
+    def stop_reason(self) -> str | None:
+        """Why the render stopped early (None: it did not): 'cancel' or 'time_limit'; a stop
+        flagged without a reason (``cancelled`` set when a phase ran out of time) is the
+        time limit once the deadline has passed."""
+        if not self.cancelled:
+            return None
+        return self.stopped_by or ("time_limit" if self.expired() else "cancel")
 
     def remaining(self) -> float:
         """Seconds left before the deadline (inf without a time limit)."""

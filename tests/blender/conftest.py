@@ -39,3 +39,12 @@ def fresh_scene():
     """An empty scene per test."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     yield bpy.context.scene
+
+
+@pytest.fixture
+def interactive(monkeypatch):
+    """Render as in Blender's UI, where a cancelled render (Esc) keeps its partial image;
+    in background mode, where these tests run, a cancel is an error (``addon.engine``)."""
+    from addon.engine import ErcutsRenderEngine
+
+    monkeypatch.setattr(ErcutsRenderEngine, "_is_batch", lambda self: False)

@@ -158,7 +158,7 @@ def test_progressive_preview_is_shown(tmp_path, monkeypatch):
     assert img[..., :3].max() > 0
 
 
-def test_cancel_after_first_phase_keeps_partial_image(tmp_path, monkeypatch):
+def test_cancel_after_first_phase_keeps_partial_image(tmp_path, monkeypatch, interactive):
     """Esc (test_break) during the ER chains: the rough BDPT image is kept, not black."""
     phases = []
     progress = ErcutsRenderEngine._progress
@@ -286,7 +286,7 @@ def test_sidecar_of_still_with_ercuts_statistics(tmp_path):
     assert layer["vpl"] and layer["cuts"]  # VPL and cut statistics of the core's report
 
 
-def test_cancelled_render_keeps_the_earlier_sidecar(tmp_path, monkeypatch):
+def test_cancelled_render_keeps_the_earlier_sidecar(tmp_path, monkeypatch, interactive):
     """Esc during a frame: Blender writes no image, and the frame's statistics file from
     the earlier good render is not replaced by the cancelled one's."""
     s = _scene(samples=2)

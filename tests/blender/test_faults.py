@@ -68,7 +68,8 @@ def cancel_in(monkeypatch, phase: str) -> list[str]:
 
 
 @pytest.mark.parametrize("phase", PHASES)
-def test_cancel_in_every_phase_returns_and_blender_renders_again(tmp_path, monkeypatch, phase):
+def test_cancel_in_every_phase_returns_and_blender_renders_again(tmp_path, monkeypatch, phase,
+                                                                 interactive):
     ercuts_scene()
     seen = cancel_in(monkeypatch, phase)
     img = bh.render_exr(tmp_path / "cancelled.exr")
@@ -81,7 +82,7 @@ def test_cancel_in_every_phase_returns_and_blender_renders_again(tmp_path, monke
     assert not engine.last_render["cancelled"] and again[..., :3].mean() > 0
 
 
-def test_cancelled_renders_free_their_memory(tmp_path, monkeypatch):
+def test_cancelled_renders_free_their_memory(tmp_path, monkeypatch, interactive):
     ercuts_scene()
     phase = {"now": PHASES[0]}
     original = engine.ErcutsRenderEngine._progress

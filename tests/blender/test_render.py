@@ -182,7 +182,7 @@ def test_material_warning_reported_once(tmp_path):
     assert sum("'Shiny'" in w for w in warnings) == 1
 
 
-def test_progress_and_cancel(tmp_path, monkeypatch):
+def test_progress_and_cancel(tmp_path, monkeypatch, interactive):
     """The core's progress callback polls for cancel; a cancel keeps the partial image.
 
     RNA methods (test_break, update_progress) cannot be patched on the instance, so the

@@ -65,7 +65,8 @@ def test_statistics_and_diagnostic_images(ercuts_room):
         assert 0 < st["P"] < st["P_all"]
     else:                           # VPL: the area light's VPLs carry the direct light
         assert st["vpls_emitter"] > 0 and "direct" not in ercuts_room.timings
-    assert 0 < st["acceptance_bidirectional"] < 1 and st["proposed_multichain"] == 0
+    # the multi-chain perturbation cannot apply without specular lobes: not reported (issue 12)
+    assert 0 < st["acceptance_bidirectional"] < 1 and "proposed_multichain" not in st
     assert 1 <= st["cut_size_mean"] <= st["cut_size_max"] <= 1000
     for phase in ("bdpt", "chains", "vpls", "tree", "cuts"):
         assert ercuts_room.timings[phase] >= 0

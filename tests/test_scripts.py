@@ -36,7 +36,7 @@ def test_main_sh_renders_the_scene_given_first(repo, tmp_path):
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert sorted(os.listdir(out)) == ["cornell_box.exr", "cornell_box.png"]
-    assert re.search(r"cornell_box\.blend with ERCUTS in [\d.]+ s", proc.stdout)
+    assert re.search(r"cornell_box\.blend with ERCUTS \(integrator PATH\) in [\d.]+ s", proc.stdout)
     assert (out / "cornell_box.exr").stat().st_size > 10_000
 
 

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from ...bsdf import Bsdf, bsdf_max_value
 from ...scene import BuiltScene
 from ...settings import RenderSettings
-from .lightcuts import ShadingPoints, brute_force, lightcut
+from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
 from .pacing import GatherPace, Schedule
 from .vpl import GBuffer
 
@@ -164,7 +164,8 @@ class Gather:
 
     def _shading_points(self, idx: NDArray, f_bound: NDArray) -> ShadingPoints:
         """The lightcut shading points of G-buffer entries ``idx`` (BSDF and visibility
-        callbacks; ``f_bound`` (Q,) the materials' bound)."""
+        callbacks; ``f_bound`` (Q,) the materials' bound, used at diffuse points; glossy
+        points get :class:`.lightcuts.GlossyReceivers`)."""
         scene, g = self.scene, self.g
         bsdf = Bsdf.from_table(scene.materials, g.mat[idx], g.ns[idx], g.ng[idx])
         wo, ng = g.wo[idx], g.ng[idx]
@@ -176,7 +177,9 @@ class Gather:
         def visible(k, q, qn):
             return scene.tracer.visible(p[k], ng[k], q, qn)
 
-        return ShadingPoints(p, g.ns[idx], wo, f_bound[idx], eval_f, visible)
+        # Glossy points: per-cluster GGX bound (f_bound is no bound for a glossy lobe)
+        glossy = None if bsdf.all_diffuse else GlossyReceivers.from_bsdf(bsdf, wo, g.ns[idx])
+        return ShadingPoints(p, g.ns[idx], wo, f_bound[idx], eval_f, visible, glossy=glossy)
 
 
 def spread_order(points: NDArray, seed: int) -> NDArray:

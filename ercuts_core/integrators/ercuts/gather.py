@@ -34,6 +34,10 @@ GLOSSY_ROUGHNESS = 0.5
 ERROR_MODES = {"NODE": "bound", "TOTAL": "total", "LITERAL": "literal"}
 #: Consecutive shading points kept together in the shuffled gather order (coherent rays).
 GATHER_RUN = 32
+#: Glossy shading points get the per-cluster GGX material bound (:class:`.lightcuts.
+#: GlossyReceivers`); False falls back to the constant lobe-peak bound of ``bsdf_max_value``,
+#: which glossy lobes exceed (kept for benchmarks/bench_glossy_bound.py's comparison only).
+GLOSSY_CLUSTER_BOUND = True
 
 
 @dataclass
@@ -178,7 +182,8 @@ class Gather:
             return scene.tracer.visible(p[k], ng[k], q, qn)
 
         # Glossy points: per-cluster GGX bound (f_bound is no bound for a glossy lobe)
-        glossy = None if bsdf.all_diffuse else GlossyReceivers.from_bsdf(bsdf, wo, g.ns[idx])
+        glossy = (GlossyReceivers.from_bsdf(bsdf, wo, g.ns[idx])
+                  if GLOSSY_CLUSTER_BOUND and not bsdf.all_diffuse else None)
         return ShadingPoints(p, g.ns[idx], wo, f_bound[idx], eval_f, visible, glossy=glossy)
 
 

@@ -191,3 +191,22 @@ def test_total_mode_relative_error_at_glossy_receivers(max_error: float) -> None
     got = luminance(res.radiance)
     assert np.all(np.abs(got - exact) <= max_error * exact + 1e-12 * exact.max())
     assert res.cut_size.mean() < 0.9 * len(lights[0])
+
+
+def test_glossy_receivers_masks() -> None:
+    """Diffuse lanes and normals that are not the lobe's keep the constant bound; a lightcut
+    normal opposite to the lobe's (no reflected light) or a grazing wo gets no specular
+    bound; the mirror direction is a unit vector."""
+    up = np.tile([0.0, 0.0, 1.0], (5, 1))
+    bsdf = Bsdf.from_params(np.full((5, 3), 0.5), [0.2, 0.2, 0.2, 0.2, 1.0], 0.0,
+                            [0.5, 0.5, 0.5, 0.5, 0.0], up, up)
+    wo = _unit(np.array([[0.3, 0.0, 1.0], [0.3, 0.0, 1.0], [1.0, 0.0, 1e-12],
+                         [0.3, 0.0, 1.0], [0.3, 0.0, 1.0]]))
+    n = up.copy()
+    n[1] = -up[1]                                  # opposite of the lobe's normal
+    n[3] = _unit(np.array([[0.0, 0.1, 1.0]]))[0]   # some other normal
+    g = GlossyReceivers.from_bsdf(bsdf, wo, n)
+    assert g.mask.tolist() == [True, True, True, False, False]
+    assert np.all(g.spec[0] > 0) and np.all(g.spec[1:] == 0)
+    np.testing.assert_allclose(np.linalg.norm(g.r, axis=1), 1.0)
+    np.testing.assert_allclose(g.r[0], wo[0] * [-1, -1, 1])

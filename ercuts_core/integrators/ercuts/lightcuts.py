@@ -10,7 +10,9 @@ and the estimate always see the same hemispheres), is approximated on a *cut* of
 light tree: a cluster C with representative r contributes ``M_r G_r V_r I_C`` (RGB).
 Its error is bounded by
 ``L̄_C = cosbound(x, n_x, box_C) · Ḡ_C · Y(f̄_x ⊙ I_C)`` (V̄ = 1; shared docs algorithm.md
-§E.2 (a)–(c)); leaves are exact.  Starting from the root, every cut node whose bound
+§E.2 (a)–(c)); leaves are exact.  At glossy receivers (:class:`GlossyReceivers`) the
+material factor cosbound·f̄_x is a per-cluster bound of the GGX lobe instead (the lobe's
+peak f̄_x is exceeded there, up to ∝ 1/(n·wo) at grazing angles).  Starting from the root, every cut node whose bound
 exceeds ``max_error`` × (the point's current total estimate) is replaced by its two
 children (Weber's law, 2 %), until no node qualifies or the cut holds ``max_cut_size``
 nodes.  The child that shares its parent's representative reuses M·G·V (scaled by

@@ -370,7 +370,9 @@ def bsdf_max_value(table: MaterialTable, mat_idx: ArrayLike) -> F64:
     Exact for the diffuse part (kd/π). For the specular part it is the value of the lobe
     peak at normal incidence (wo = wi = n: D = 1/(πα²), G2 = 1) with the largest Fresnel
     value max(F0, F90) = F90:  F90/(4π α²). The true supremum is unbounded at grazing angles
-    (f_spec ∝ 1/(n·wo n·wi)), so this is an approximation for glossy materials.
+    (f_spec ∝ 1/(n·wo n·wi)), so this is an approximation for glossy materials: the
+    lightcuts use the per-cluster bound :func:`ggx_cosine_bound` at glossy receivers
+    (:class:`ercuts_core.integrators.ercuts.lightcuts.GlossyReceivers`).
     """
     idx = np.asarray(mat_idx, dtype=np.int64).reshape(-1)
     n = idx.shape[0]
@@ -379,3 +381,40 @@ def bsdf_max_value(table: MaterialTable, mat_idx: ArrayLike) -> F64:
     spec_peak = _div(np.ones(n), 4.0 * np.pi * bsdf.alpha ** 2)
     spec = np.where(bsdf.is_diffuse[:, None], 0.0, np.maximum(bsdf.f0, bsdf.f90) * spec_peak[:, None])
     return bsdf.kd * INV_PI + spec
+
+
+def ggx_cosine_bound(cos_o: ArrayLike, alpha: ArrayLike, cos_r: ArrayLike) -> F64:
+    """Upper bound (N,) of D(h)·G2(wo, wi)·(n·wi) / (4 |n·wo| |n·wi|) = D·G2/(4 n·wo) over
+    every wi whose angle to the mirror direction r = 2(n·wo)n − wo is at least
+    θ_r = arccos(cos_r), i.e. of f_spec·cos θ_i / F for the GGX lobe of :class:`Bsdf`.
+
+    Multiplied by max(F0, F90) (Schlick's F lies between F0 and F90) it bounds the
+    specular part of the lightcut material term M = f·cos θ_i over a cluster whose box
+    is seen under angles ≥ θ_r from r (the receiver cosine cancels the 1/(n·wi) of the
+    microfacet BRDF, so no minimum of n·wi over the box is needed).  Derivation:
+
+    * Half-vector cone.  wi is the mirror image of wo about its half vector h:
+      wi = R(h) = 2(wo·h)h − wo, and r = R(n).  R is 2-Lipschitz on the unit sphere
+      (for a tangent step dh ⊥ h, |dR|² = 4|dh|²((wo·ê)² + (wo·h)²) ≤ 4|dh|², ê = dh/|dh|),
+      so angle(wi, r) ≤ 2·angle(h, n):  θ_h ≥ θ_r/2 and
+      cos θ_h ≤ cos(θ_r/2) = √((1 + cos_r)/2).  This is the bound over the lobe's
+      reflection cone of Walter et al. 2005 (§4.1, Phong: the cosine to r bounded over
+      the cluster's box), carried to the half vector; the converse direction (h moves by
+      *at most* half of wi's motion) is false near grazing angles (algorithm.md §E.2(d)).
+    * D.  The GGX NDF [Walter et al. 2007, eq. 33] increases with cos θ_h for α ≤ 1, so
+      D ≤ D(√((1 + cos_r)/2)); cos_r ≥ 1 (r inside the cone) gives the peak 1/(πα²).
+    * G2.  Height-correlated Smith [Heitz 2014, eq. 99]: G2 = 1/(1 + Λ(wo) + Λ(wi)) ≤
+      1/(1 + Λ(wo)) = G1(wo) since Λ ≥ 0.  It keeps the bound finite at grazing wo:
+      G1(wo)/(4 n·wo) = 1/(2(n·wo + √((n·wo)² + α²(1 − (n·wo)²)))) ≤ 1/(2α sin θ_o).
+    * Lanes with n·wo ≤ COS_EPS have f = 0 (bound 0).
+
+    Args:
+        cos_o: (N,) n·wo with the lobe's (flipped) shading normal.
+        alpha: (N,) GGX alpha.
+        cos_r: (N,) upper bound of cos∠(r, wi) over the directions (values > 1 act as 1).
+    """
+    cos_o = np.asarray(cos_o, np.float64)
+    alpha = np.asarray(alpha, np.float64)
+    cos_h = np.sqrt(0.5 * (1.0 + np.clip(np.asarray(cos_r, np.float64), -1.0, 1.0)))
+    g1_4 = _div(1.0, 4.0 * np.maximum(cos_o, 0.0) * (1.0 + smith_lambda(cos_o, alpha)))
+    return np.where(cos_o > COS_EPS, ggx_d(cos_h, alpha) * g1_4, 0.0)

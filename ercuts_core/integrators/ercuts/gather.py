@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from ...bsdf import Bsdf, bsdf_max_value
 from ...scene import BuiltScene
 from ...settings import RenderSettings
-from .lightcuts import ShadingPoints, brute_force, lightcut
+from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
 from .pacing import GatherPace, Schedule
 from .vpl import GBuffer
 
@@ -34,6 +34,10 @@ GLOSSY_ROUGHNESS = 0.5
 ERROR_MODES = {"NODE": "bound", "TOTAL": "total", "LITERAL": "literal"}
 #: Consecutive shading points kept together in the shuffled gather order (coherent rays).
 GATHER_RUN = 32
+#: Glossy shading points get the per-cluster GGX material bound (:class:`.lightcuts.
+#: GlossyReceivers`); False falls back to the constant lobe-peak bound of ``bsdf_max_value``,
+#: which glossy lobes exceed (kept for benchmarks/bench_glossy_bound.py's comparison only).
+GLOSSY_CLUSTER_BOUND = True
 
 
 @dataclass
@@ -164,7 +168,8 @@ class Gather:
 
     def _shading_points(self, idx: NDArray, f_bound: NDArray) -> ShadingPoints:
         """The lightcut shading points of G-buffer entries ``idx`` (BSDF and visibility
-        callbacks; ``f_bound`` (Q,) the materials' bound)."""
+        callbacks; ``f_bound`` (Q,) the materials' bound, used at diffuse points; glossy
+        points get :class:`.lightcuts.GlossyReceivers`)."""
         scene, g = self.scene, self.g
         bsdf = Bsdf.from_table(scene.materials, g.mat[idx], g.ns[idx], g.ng[idx])
         wo, ng = g.wo[idx], g.ng[idx]
@@ -176,7 +181,10 @@ class Gather:
         def visible(k, q, qn):
             return scene.tracer.visible(p[k], ng[k], q, qn)
 
-        return ShadingPoints(p, g.ns[idx], wo, f_bound[idx], eval_f, visible)
+        # Glossy points: per-cluster GGX bound (f_bound is no bound for a glossy lobe)
+        glossy = (GlossyReceivers.from_bsdf(bsdf, wo, g.ns[idx])
+                  if GLOSSY_CLUSTER_BOUND and not bsdf.all_diffuse else None)
+        return ShadingPoints(p, g.ns[idx], wo, f_bound[idx], eval_f, visible, glossy=glossy)
 
 
 def spread_order(points: NDArray, seed: int) -> NDArray:

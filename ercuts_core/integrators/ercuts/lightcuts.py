@@ -10,7 +10,9 @@ and the estimate always see the same hemispheres), is approximated on a *cut* of
 light tree: a cluster C with representative r contributes ``M_r G_r V_r I_C`` (RGB).
 Its error is bounded by
 ``L̄_C = cosbound(x, n_x, box_C) · Ḡ_C · Y(f̄_x ⊙ I_C)`` (V̄ = 1; shared docs algorithm.md
-§E.2 (a)–(c)); leaves are exact.  Starting from the root, every cut node whose bound
+§E.2 (a)–(c)); leaves are exact.  At glossy receivers (:class:`GlossyReceivers`) the
+material factor cosbound·f̄_x is a per-cluster bound of the GGX lobe instead (the lobe's
+peak f̄_x is exceeded there, up to ∝ 1/(n·wo) at grazing angles).  Starting from the root, every cut node whose bound
 exceeds ``max_error`` × (the point's current total estimate) is replaced by its two
 children (Weber's law, 2 %), until no node qualifies or the cut holds ``max_cut_size``
 nodes.  The child that shares its parent's representative reuses M·G·V (scaled by
@@ -42,6 +44,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...arrays import take_rows
+from ...bsdf import COS_EPS, Bsdf, ggx_cosine_bound
+from ...sampling import INV_PI
 from ...vecmath import dot
 from .light_tree import LightTree, luminance
 
@@ -56,6 +60,61 @@ _BAND = 0.25
 
 EvalF = Callable[[NDArray, NDArray], NDArray]
 Visible = Callable[[NDArray, NDArray, NDArray], NDArray]
+
+
+@dataclass
+class GlossyReceivers:
+    """The GGX lobes of the glossy points of a :class:`ShadingPoints` batch (per point,
+    aligned with its P points), for the per-cluster material bound of :func:`cluster_bound`.
+
+    At a point with ``mask`` True the material term M = f(wo, wi)·cos θ_x is bounded over a
+    cluster box B by
+
+        M̄ = (kd/π)·cosbound(x, n, B)  +  [cosbound(x, n, B) > 0] · max(F0, F90) ·
+             D(√((1 + cosbound(x, r, B))/2)) · G1(wo) / (4 n·wo)
+
+    (:func:`ercuts_core.bsdf.ggx_cosine_bound`; r = 2(n·wo)n − wo the mirror direction).
+    The diffuse part is exact as before; the specular part uses the receiver cosine to
+    cancel the 1/(n·wi) of the microfacet BRDF, which holds because the point's lightcut
+    normal ``ShadingPoints.n`` is the lobe's shading normal (``mask`` is False
+    otherwise; those points keep the constant ``f_bound``).
+
+    Attributes:
+        mask: (P,) bool, points whose per-cluster bound is used.
+        r: (P,3) unit mirror directions of wo about the lobe's normal.
+        kd_pi: (P,3) diffuse part kd/π [1/sr].
+        spec: (P,3) max(F0, F90) (0 where n·wo ≤ COS_EPS: no specular light at all).
+        cos_o: (P,) n·wo.
+        alpha: (P,) GGX alpha.
+    """
+
+    mask: NDArray
+    r: NDArray
+    kd_pi: NDArray
+    spec: NDArray
+    cos_o: NDArray
+    alpha: NDArray
+
+    @classmethod
+    def from_bsdf(cls, bsdf: Bsdf, wo: NDArray, n: NDArray) -> GlossyReceivers:
+        """The glossy lobes of P points with the :class:`~ercuts_core.bsdf.Bsdf` ``bsdf``
+        (P lanes), outgoing directions ``wo`` and lightcut normals ``n`` (P,3).
+
+        A point is in ``mask`` when its lobe is specular and ``n`` is the lobe's normal
+        flipped to the side of wo (as in the G-buffer).  Where ``n`` is the opposite of the
+        lobe's normal, f·max(0, n·wi) = 0 for every wi and the specular bound is 0.
+        """
+        wo = np.asarray(wo, np.float64).reshape(-1, 3)
+        n = np.asarray(n, np.float64).reshape(-1, 3)
+        sign = np.where(dot(wo, bsdf.ng) < 0.0, -1.0, 1.0)
+        ns = bsdf.ns * sign[:, None]                     # the normal of Bsdf._eval_pdf
+        align = dot(ns, n)
+        cos_o = dot(wo, ns)
+        mask = ~bsdf.is_diffuse & (np.abs(align) >= 1.0 - 1e-12)   # equal up to rounding
+        lit = mask & (align > 0.0) & (cos_o > COS_EPS)
+        spec = np.where(lit[:, None], np.maximum(bsdf.f0, bsdf.f90), 0.0)
+        r = 2.0 * cos_o[:, None] * ns - wo
+        return cls(mask, r, bsdf.kd * INV_PI, spec, cos_o, np.asarray(bsdf.alpha, np.float64))
 
 
 @dataclass
@@ -75,6 +134,9 @@ class ShadingPoints:
         transmissive: optional (P,) bool.  Where True, light from below the surface
             counts with |cos θ_x|; elsewhere only the upper hemisphere counts
             (max(0, cos θ_x)), and the bound uses the matching hemisphere(s).
+        glossy: optional :class:`GlossyReceivers`: at its points, the material bound is
+            computed per cluster (the GGX lobe's bound over the cluster's directions)
+            instead of the constant ``f_bound``, which is not a bound for glossy lobes.
     """
 
     p: NDArray
@@ -84,6 +146,7 @@ class ShadingPoints:
     eval_f: EvalF
     visible: Visible
     transmissive: NDArray | None = None
+    glossy: GlossyReceivers | None = None
 
     @property
     def count(self) -> int:
@@ -196,16 +259,39 @@ def _receiver_cos_bound(pts: ShadingPoints, pidx: NDArray, bmin: NDArray,
     return cb
 
 
+def _glossy_material_bound(pts: ShadingPoints, pidx: NDArray, bmin: NDArray, bmax: NDArray,
+                           cb: NDArray, inten: NDArray, m: NDArray) -> NDArray:
+    """``m`` (K,) with the entries at glossy points replaced by Y(M̄ ⊙ I_C), M̄ the
+    per-cluster material bound of :class:`GlossyReceivers` (only those entries computed)."""
+    gl = pts.glossy
+    k = np.flatnonzero(np.asarray(gl.mask, bool)[pidx])
+    if k.size == 0:
+        return m
+    q = pidx[k]
+    cos_r = cosine_bound(take_rows(pts.p, q), take_rows(gl.r, q), bmin[k], bmax[k])
+    s = ggx_cosine_bound(gl.cos_o[q], gl.alpha[q], cos_r)
+    s = np.where(cb[k] > 0.0, s, 0.0)
+    mb = cb[k, None] * take_rows(gl.kd_pi, q) + s[:, None] * take_rows(gl.spec, q)
+    m = m.copy()
+    m[k] = luminance(mb * inten[k])
+    return m
+
+
 def cluster_bound(tree: LightTree, node: NDArray, pts: ShadingPoints, pidx: NDArray,
                   clamp: float = 0.0) -> NDArray:
     """Luminance error bound L̄_C (K,) of cut entries (point pidx, node); 0 for leaves.
 
     L̄_C = cosbound(x, n_x, box_C) · Ḡ_C · Y(f̄_x ⊙ I_C).  The per-channel product
     bounds Y(f ⊙ I_C) for any BSDF value f ≤ f̄ (it equals Y(f̄)·Y(I_C) for grey f̄).
+    At the glossy points of ``pts.glossy`` the material factor cosbound·f̄ is replaced by
+    the per-pair bound M̄ of :class:`GlossyReceivers` (L̄_C = Ḡ_C · Y(M̄ ⊙ I_C)).
     """
     bmin, bmax = take_rows(tree.bmin, node), take_rows(tree.bmax, node)
-    m = _receiver_cos_bound(pts, pidx, bmin, bmax)
-    m = m * luminance(take_rows(pts.f_bound, pidx) * take_rows(tree.intensity, node))
+    cb = _receiver_cos_bound(pts, pidx, bmin, bmax)
+    inten = take_rows(tree.intensity, node)
+    m = cb * luminance(take_rows(pts.f_bound, pidx) * inten)
+    if pts.glossy is not None:
+        m = _glossy_material_bound(pts, pidx, bmin, bmax, cb, inten, m)
     m = np.where(take_rows(tree.is_leaf, node), 0.0, m)
     g = geometry_bound(take_rows(pts.p, pidx), bmin, bmax, take_rows(tree.cone_axis, node),
                        take_rows(tree.cone_cos, node), clamp)

@@ -37,16 +37,23 @@ def _load(spec: str, width: int | None, height: int | None):
     return load_npz(spec)
 
 
+#: Seconds between two progress-bar redraws on a terminal, and in a log (stderr not a
+#: terminal: every redraw is a new chunk of the log, so far fewer).
+BAR_INTERVAL_TTY, BAR_INTERVAL_LOG = 1.0, 5.0
+
+
 def _progress_bar():
-    """A tqdm progress callback (fraction, message) -> None."""
+    """A tqdm progress callback (fraction, message) -> None that redraws at most every
+    :data:`BAR_INTERVAL_TTY` s on a terminal and :data:`BAR_INTERVAL_LOG` s in a log."""
     from tqdm import tqdm
 
-    bar = tqdm(total=1000, unit="‰", file=sys.stderr, dynamic_ncols=True, leave=True, mininterval=1.0)
+    interval = BAR_INTERVAL_TTY if sys.stderr.isatty() else BAR_INTERVAL_LOG
+    bar = tqdm(total=1000, unit="‰", file=sys.stderr, dynamic_ncols=True, leave=True,
+               mininterval=interval, maxinterval=max(interval, 10.0))
 
     def progress(fraction: float, message: str):
-        bar.n = int(fraction * 1000)
         bar.set_description(message, refresh=False)
-        bar.refresh()
+        bar.update(max(int(fraction * 1000) - bar.n, 0))     # redraws only after `interval`
         return None
 
     return bar, progress

@@ -153,6 +153,12 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         description="Lightcut error threshold, relative to the pixel estimate (0.02 = Weber's law)",
         default=_default("max_error", 0.02), min=0.0, max=1.0, precision=3,
     )
+    iterations: IntProperty(
+        name="Iterations",
+        description=("Complete Ercuts iterations (chains, virtual point lights, light tree and "
+                     "gather each time), averaged; 0 = as many as the time limit allows"),
+        default=_default("iterations", 1), min=0, soft_max=256,
+    )
     chains_per_pixel: FloatProperty(
         name="Chains per Pixel",
         description="Average number of energy-redistribution chains started per pixel",

@@ -127,6 +127,7 @@ class ERCUTS_RENDER_PT_ercuts(ErcutsPanel, bpy.types.Panel):
         col = layout.column(align=True)
         col.prop(settings, "chains_per_pixel")
         col.prop(settings, "chain_length")
+        layout.prop(settings, "iterations")
         layout.prop(settings, "clamp")
 
 

@@ -54,6 +54,10 @@ class RenderSettings:
         batch_rays: target rays per wavefront batch (memory vs. per-call overhead).
         threads: embreex threads per batch (0 = all cores).
         max_error: lightcut error threshold relative to the estimate (Weber's law, 2 %).
+        iterations: ERCUTS iterations, each a complete, independent Ercuts estimate (its own
+            rough BDPT, chains, VPLs, tree and gather; seed and VPL clamp from the iteration
+            index), averaged (:mod:`~ercuts_core.integrators.ercuts.progressive`); 0 = as many
+            as ``time_limit`` allows (one without a time limit).
         chains_per_pixel: average number of ER chains started per pixel (c).
         chain_length: mutation steps per chain (N); every step deposits P/n.
         lens_perturbation, caustic_perturbation, multichain_perturbation (inactive: it needs
@@ -97,6 +101,7 @@ class RenderSettings:
     batch_rays: int = 1 << 17
     threads: int = 0
     max_error: float = 0.02
+    iterations: int = 1
     chains_per_pixel: float = 0.25
     chain_length: int = 100
     lens_perturbation: bool = True
@@ -138,6 +143,8 @@ class RenderSettings:
             raise ValueError(f"unknown direct_light {self.direct_light!r}; expected one of {DIRECT_LIGHTS}")
         if not 0 < self.max_error < 1:
             raise ValueError(f"max_error must be in (0, 1), got {self.max_error}")
+        if self.iterations < 0:
+            raise ValueError(f"iterations must be >= 0 (0 = until the time limit), got {self.iterations}")
         if self.chains_per_pixel <= 0 or self.chain_length < 1:
             raise ValueError("chains_per_pixel must be > 0 and chain_length >= 1")
         if min(self.max_cut_size, self.shading_samples, self.e1_samples, self.direct_samples) < 1:

@@ -11,7 +11,7 @@ sys.path.insert(0, os.path.join(ROOT, "scripts"))
 
 import import_cycles  # noqa: E402
 
-STEPS = ("initialization", "seeding", "er_sampling", "mutations", "paths", "vpl", "light_tree",
+STEPS = ("initialization", "seeding", "er_sampling", "mutations", "paths", "vpl", "light_tree", "progressive",
          "lightcuts", "gather", "pacing", "integrator")
 
 

@@ -8,7 +8,8 @@
 4. :mod:`.light_tree` — the binary light tree with the paper's pairing weight;
 5. :mod:`.lightcuts` — the cut per shading point; :mod:`.gather` runs it over the image.
 
-:mod:`.integrator` drives the phases; :mod:`.pacing` holds their time shares, progress
+:mod:`.integrator` drives the phases; :mod:`.progressive` repeats them as independent
+iterations; :mod:`.pacing` holds their time shares, progress
 fractions and the gather's pacing under a time limit.
 """
 from .integrator import ErcutsIntegrator

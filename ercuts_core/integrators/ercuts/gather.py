@@ -138,7 +138,7 @@ class Gather:
             done = start + len(idx)
             done_pt[idx] = True
             pace.update(len(idx), time.perf_counter() - t_batch, cut[idx].mean(),
-                        len(pts_all) - done, clock.remaining())
+                        len(pts_all) - done, schedule.remaining())
             if not report(done) and done < len(pts_all):
                 stats["gather_incomplete"] = 1
                 clock.cancelled = True

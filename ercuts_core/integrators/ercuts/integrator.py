@@ -89,6 +89,7 @@ from .initialization import indirect_energy, rough_image_energy, seeds_from_path
 from .light_tree import build_light_tree
 from .mutations import INACTIVE, NAMES, MutationContext
 from .pacing import Schedule
+from .progressive import iteration_settings, iteration_target, more_iterations
 from .paths import PathBatch
 from .seeding import seed_paths
 from .vpl import GBuffer, build_gbuffer, g_clamp, make_vpls
@@ -113,15 +114,51 @@ class ErcutsIntegrator:
 
     # ------------------------------------------------------------------ driver
     def render(self, film: Film, clock: Clock, timings: dict, stats: dict) -> None:
-        """Render into ``film``; a cancel (or the time limit) before the gather leaves the
-        rough BDPT image there, during the gather the rough image where not gathered."""
+        """Render ``settings.iterations`` iterations into ``film`` (:mod:`.progressive`; 0: as
+        many as the time limit allows) and average them. The first iteration stopped early
+        (cancel, time limit) leaves the rough BDPT image (before the gather) or the rough
+        image where not gathered; a later one stopped early is discarded, so the image is
+        the average of the completed iterations."""
+        base, window = self.settings, self.scene.camera.window
+        target = iteration_target(base.iterations, clock.deadline is not None)
+        k, durations = 0, []
+        while True:
+            t0 = time.perf_counter()
+            self.settings = iteration_settings(base, k)
+            part = film if k == 0 else Film(window)
+            it_timings, it_stats = (timings, stats) if k == 0 else ({}, {})
+            span = None if target is None else (k / target, (k + 1) / target)
+            complete = self._iteration(part, clock, it_timings, it_stats, paced=k == 0, span=span)
+            if k > 0:
+                for name, seconds in it_timings.items():
+                    timings[name] = timings.get(name, 0.0) + seconds
+                if not complete:
+                    stats["iterations_discarded"] = 1
+                    break
+                film.merge(part)
+            durations.append(time.perf_counter() - t0)
+            k += 1
+            stats["iterations"], stats["clamp_last_iteration"] = k, self.settings.clamp
+            if not complete or not more_iterations(k, target, clock, durations):
+                break
+            clock.show(film.image)
+        self.settings = base
+
+    def _iteration(self, film: Film, clock: Clock, timings: dict, stats: dict, paced: bool,
+                   span: tuple[float, float] | None) -> bool:
+        """One complete Ercuts estimate into ``film`` (the five phases); ``paced``: its phases
+        share the time left (the first iteration), else they run at full quality and the
+        iteration is abandoned if the time runs out; ``span``: its part of the progress
+        (:class:`~.pacing.Schedule`). Returns False when stopped early."""
         self.clock, self.timings, self.stats = clock, timings, stats
-        self.schedule = Schedule(clock, self.settings.direct_vpls)
+        self.schedule = Schedule(clock, self.settings.direct_vpls, paced=paced, span=span)
         self.rough: Film | None = None
         try:
             self._render(film)
         except _Stopped:
             film.merge(self.rough)
+            return False
+        return not clock.cancelled
 
     def _render(self, film: Film) -> None:
         s, stats = self.settings, self.stats
@@ -264,7 +301,7 @@ class ErcutsIntegrator:
         (fewer when the phase's time share asks for it)."""
         s, stats, sched = self.settings, self.stats, self.schedule
         n_e1 = s.e1_samples
-        if self.clock.deadline is not None:
+        if sched.paced and self.clock.deadline is not None:
             budget = max(sched.deadline("vpl") - time.perf_counter(), 0.0)
             n_e1 = int(min(n_e1, max(16, budget * _E1_RATE / max(int((chains.count > 0).sum()), 1))))
         stats["e1_samples"] = n_e1

@@ -36,11 +36,20 @@ class Schedule:
     Args:
         clock: the render's :class:`~ercuts_core.integrators.base.Clock`.
         direct_vpls: the paper's direct light by VPLs (no direct-light phase).
+        paced: the phases share the time left (the first iteration); False: no phase
+            deadlines and no gather pacing (later iterations run at full quality and are
+            abandoned if the time limit passes).
+        span: (start, end) of the render's progress that this iteration covers (iteration k
+            of N: (k/N, (k+1)/N)); None: progress is the share of the time limit used (as
+            many iterations as the time allows).
     """
 
-    def __init__(self, clock, direct_vpls: bool):
+    def __init__(self, clock, direct_vpls: bool, paced: bool = True,
+                 span: tuple[float, float] | None = (0.0, 1.0)):
         self.clock = clock
         self.direct_vpls = direct_vpls
+        self.paced = paced
+        self.span = span
         self.share = dict(SHARE)       # time shares of this render
 
     def grow_direct(self, f_direct: float) -> None:
@@ -48,16 +57,20 @@ class Schedule:
         image's direct fraction) more of the time."""
         self.share["direct"] = SHARE["direct"] + DIRECT_SHARE_GROWTH * min(max(f_direct, 0.0), 1.0)
 
-    @staticmethod
-    def fraction(phase: str, f: float) -> float:
-        """Progress over the whole render of fraction ``f`` of ``phase`` (:data:`PHASES`)."""
+    def fraction(self, phase: str, f: float) -> float:
+        """Progress over the whole render of fraction ``f`` of ``phase`` (:data:`PHASES`
+        within :attr:`span`; the time used without a span)."""
+        if self.span is None:
+            clock = self.clock
+            return min(max((time.perf_counter() - clock.start) / (clock.deadline - clock.start), 0.0), 1.0)
         lo, hi = PHASES[phase]
-        return lo + (hi - lo) * min(max(f, 0.0), 1.0)
+        g = lo + (hi - lo) * min(max(f, 0.0), 1.0)
+        return self.span[0] + (self.span[1] - self.span[0]) * g
 
     def deadline(self, phase: str) -> float | None:
         """End of ``phase``'s share (:data:`SHARE`) of the time left, or None without a limit."""
         clock = self.clock
-        if clock.deadline is None:
+        if clock.deadline is None or not self.paced:
             return None
         share = self.share
         order = [p for p in share if p != "direct" or not self.direct_vpls]
@@ -65,6 +78,10 @@ class Schedule:
         gather = 1.0 - sum(SHARE[p] for p in order)
         now = time.perf_counter()
         return now + max(clock.deadline - now, 0.0) * share[phase] / (later + gather)
+
+    def remaining(self) -> float:
+        """Seconds the pacing may plan with: the clock's, inf when not :attr:`paced`."""
+        return self.clock.remaining() if self.paced else float("inf")
 
     def report(self, phase: str, f: float, message: str) -> bool:
         """Report fraction ``f`` of ``phase``; False once cancelled or past the time limit."""

@@ -1,0 +1,65 @@
+"""Progressive Ercuts: a render is a sequence of iterations, each a complete, independent
+Ercuts estimate (fresh rough BDPT samples and P, fresh chains, a new VPL set and light
+tree, a new gather), averaged into the film — Progressive Lightcuts (Davidovič, Georgiev,
+Slusallek 2012) applied to the paper's pipeline. Memory is that of one iteration, the
+error keeps falling with the time spent, and iteration k is a deterministic function of
+(seed, k) (:func:`iteration_seed`), so iterations can run anywhere and be merged.
+
+Consistency: the VPL geometry clamp (a minimum distance) shrinks with the iteration index
+as the radius of probabilistic progressive photon mapping (Knaus and Zwicker 2011:
+r_k² = r_1² k^(α−1), α = 2/3), d_k = d_1 k^(−1/6) (:func:`iteration_clamp`): the clamping
+bias of iteration k vanishes as k → ∞ while the variance added by the less-clamped VPLs
+grows slowly enough that the average converges, the role of Progressive Lightcuts'
+relaxed clamping.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ...settings import RenderSettings
+
+#: Knaus and Zwicker's α: the squared clamp distance shrinks as k^(α−1).
+CLAMP_ALPHA = 2.0 / 3.0
+#: A new iteration starts only if the time left is at least this share of the last one's
+#: duration (one that cannot finish is discarded: the time is better left unused).
+START_SHARE = 0.5
+
+
+def iteration_seed(seed: int, k: int) -> int:
+    """The seed of iteration ``k``: ``seed`` itself for k = 0 (a one-iteration render is
+    today's render), else a 31-bit seed derived from (seed, k) by numpy's SeedSequence."""
+    if k == 0:
+        return int(seed)
+    return int(np.random.SeedSequence([int(seed) & 0xFFFFFFFF, k]).generate_state(1)[0] >> 1)
+
+
+def iteration_clamp(clamp: float, k: int) -> float:
+    """The VPL clamp distance of iteration ``k`` (0-based): clamp · (k+1)^((α−1)/2)."""
+    return float(clamp) * (k + 1.0) ** ((CLAMP_ALPHA - 1.0) / 2.0)
+
+
+def iteration_settings(settings: RenderSettings, k: int) -> RenderSettings:
+    """``settings`` for iteration ``k``: its seed and clamp (the same object for k = 0)."""
+    if k == 0:
+        return settings
+    return settings.replace(seed=iteration_seed(settings.seed, k),
+                            clamp=iteration_clamp(settings.clamp, k))
+
+
+def iteration_target(iterations: int, time_limited: bool) -> int | None:
+    """How many iterations to render: ``iterations``, or None (until the time limit) for 0
+    with a time limit; 0 without a time limit means one."""
+    if iterations > 0:
+        return iterations
+    return None if time_limited else 1
+
+
+def more_iterations(done: int, target: int | None, clock, durations: list[float]) -> bool:
+    """Start another iteration after ``done``? Not when ``target`` is reached, the render was
+    cancelled, or (no target) the time left is under :data:`START_SHARE` of the last
+    iteration's duration."""
+    if clock.cancelled or (target is not None and done >= target):
+        return False
+    if target is None:
+        return clock.remaining() >= START_SHARE * durations[-1]
+    return True

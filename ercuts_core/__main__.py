@@ -62,7 +62,8 @@ def _progress_bar():
 def cmd_render(args) -> int:
     desc = _load(args.scene, args.width, args.height)
     settings = RenderSettings(integrator=args.integrator, samples=args.samples, seed=args.seed,
-                              max_depth=args.max_depth, time_limit=quick_time_limit(args.time_limit))
+                              max_depth=args.max_depth, time_limit=quick_time_limit(args.time_limit),
+                              iterations=args.iterations)
     bar, progress = _progress_bar()
     t0 = time.perf_counter()
     try:
@@ -112,6 +113,8 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--seed", type=int, default=defaults.seed, help="default: %(default)s")
     r.add_argument("--max-depth", type=int, default=defaults.max_depth,
                    help="scattering vertices per path; default: %(default)s")
+    r.add_argument("--iterations", type=int, default=defaults.iterations,
+                   help="ERCUTS iterations averaged (0 = as many as --time-limit allows)")
     r.add_argument("--time-limit", type=float, default=0.0, help="seconds, 0 = none")
     r.add_argument("--width", type=int, help="built-in scenes only: image width in pixels")
     r.add_argument("--height", type=int, help="built-in scenes only: image height in pixels")

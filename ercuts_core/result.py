@@ -60,7 +60,9 @@ class RenderResult:
         rate = rays / max(self.timings.get("render", t), 1e-9)
         st = self.stats
         parts = [f"{self.window[2]}x{self.window[3]} px", f"total {t:.2f} s"]
-        if "chains" in st:   # ERCUTS: one gather pass after the rough BDPT image
+        if "chains" in st:   # ERCUTS: one gather pass after the rough BDPT image (per iteration)
+            if st.get("iterations", 1) > 1:
+                parts.append(f"{int(st['iterations'])} iterations (first:)")
             parts += [f"BDPT {int(st.get('bdpt_samples', 0))} spp",
                       f"{int(st['chains'])} chains x {int(st.get('chain_steps', 0))} steps",
                       f"{int(st.get('vpls', 0))} VPLs",

@@ -53,11 +53,18 @@ class GBuffer:
 
 
 def build_gbuffer(scene: BuiltScene, samples: int, rng: np.random.Generator) -> tuple[GBuffer, NDArray]:
-    """Trace ``samples`` jittered camera rays per window pixel; returns the G-buffer and rays' d."""
+    """Trace ``samples`` jittered camera rays per window pixel; returns the G-buffer and rays' d.
+
+    Jittered also for one sample per pixel: the pixel value is then an unbiased estimate of
+    the pixel's integral — what the rough BDPT image (P) and the light-traced Ê1 measure. A
+    point at the pixel centre samples the image instead, which misses or over-weights
+    sub-pixel light (a VPL lighting a sliver beside a silhouette) and biased the VPL image
+    energy by −12 % (Cornell box) to +11 % (door scene) (benchmarks/results/e1_bias.md).
+    """
     w = scene.camera.window
     pix = np.repeat(np.arange(w.n_pixels), samples)
     raster = w.raster(pix).astype(np.float64)
-    raster += rng.random((len(pix), 2)) if samples > 1 else 0.5
+    raster += rng.random((len(pix), 2))
     o, d = scene.camera.generate_rays(raster)
     surf = scene.intersect(o, d)
     wo = -d

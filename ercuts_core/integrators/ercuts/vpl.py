@@ -173,7 +173,7 @@ def estimate_e1(scene: BuiltScene, g: GBuffer, window: Window, pos: NDArray, nor
 
 def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, color: NDArray,
                               gmax: float, n_samples: int, rng: np.random.Generator,
-                              chunk: int = 1 << 18, keep_going=None) -> NDArray:
+                              chunk: int = 1 << 18, keep_going=None, moments: bool = False):
     """(V,) Ê1 by tracing the VPL's own cosine emission one bounce to the camera.
 
     E1 = ∫_Ω f_r(y)·cosθ_v·|n_g(y)·ω_cam|·F(y)·V dω with F = 1/(A_pix·cos³θ·d_cam²) the
@@ -182,11 +182,13 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
     for the geometry clamp. Bounded for diffuse receivers away from the lens, unlike
     sampling pixels, whose samples near the VPL carry the 1/d² peak.
     ``keep_going(fraction) -> bool`` is called after each chunk; False stops (the rest stay 0).
+    With ``moments``, returns (Ê1, (V,) mean of the squared samples) instead.
     """
     from ...sampling import coordinate_system, sample_cosine_hemisphere, to_world
     cam = scene.camera
     V = len(pos)
     total = np.zeros(V)
+    total2 = np.zeros(V)
     for v, vv, s in _chunks(V, n_samples, chunk):
         n = len(vv)
         local = sample_cosine_hemisphere(rng.random((n, 2)))
@@ -224,9 +226,10 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
                     vis = scene.tracer.visible(yk.p[good], ng[good], cam_pos, None)
                     val[h[k[good]]] = contrib[good] * vis
         total[v] = np.bincount(vv - s, weights=val, minlength=len(v)) / n_samples
+        total2[v] = np.bincount(vv - s, weights=val * val, minlength=len(v)) / n_samples
         if keep_going is not None and not keep_going((s + len(v)) / V):
             break
-    return total
+    return (total, total2) if moments else total
 
 
 def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gmax: float,

@@ -308,7 +308,13 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
             else:
                 hi_t = t
         counts = np.clip(lo_t * want, n1, hi).astype(np.int64)
-    return estimate_e1_light_tracing(scene, pos, normal, color, gmax, counts, rng, chunk, stage(f1, 1.0))
+    e1 = estimate_e1_light_tracing(scene, pos, normal, color, gmax, counts, rng, chunk, stage(f1, 1.0))
+    # Found nothing: once more with the largest count (before the pixel-mixture estimate of
+    # make_vpls, whose rare tiny values made single VPLs several % of the image energy).
+    miss = np.flatnonzero(e1 <= 0)
+    if len(miss) and not stop[0] and (keep_going is None or keep_going(1.0)):
+        e1[miss] = estimate_e1_light_tracing(scene, pos[miss], normal[miss], color[miss], gmax, hi, rng, chunk)
+    return e1
 
 
 def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gmax: float,

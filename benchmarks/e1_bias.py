@@ -363,7 +363,9 @@ def write_md(rows, ratios, path, schemes=None):
              "Written by `benchmarks/e1_bias.py` (do not edit by hand). Settings: "
              f"`{FAST}`, default clamp 0.02, e1_samples 256, shading_samples 1. The renders of the "
              "table use the gather as it was before e474ef4 (one shading point at the pixel "
-             "centre); the rows of (3) give the gather with jittered points.", "",
+             "centre) and the plain Ê1 (256 light-traced samples per VPL, before e3caefc) — the rows "
+             "were computed at 61a6f6c (rerunning at a later commit keeps the pixel centre but "
+             "renders with the allocated Ê1); the rows of (3) give the gather with jittered points.", "",
              "`vpl_energy_ratio` = Y(VPL image + fallback)/P = Σ_v k_v·E1_gather(v)/Ê1(v) / Σ_v k_v "
              "(+ the exact fallback share), since Σ k_v·e_d = P exactly (row (6)). The rows "
              "recompute that count-weighted ratio on 150 VPLs drawn ∝ k_v (noisy: heavy tails; "

@@ -7,11 +7,18 @@ energy. Following algorithm.md §G.4 we measure P* at *unit* intensity, E1(v) = 
 Y(image of v alone with colour c_v), so that I_v = k_v·e_d/E1(v)·c_v (e_d = P/n): every
 chain state then carries exactly its share e_d of the image energy.
 
-E1 is estimated per VPL from M shading points drawn from a mixture of the whole window and
-a neighbourhood of the VPL's home pixel (where the VPL certainly shines), one-sample MIS
-over the mixture [Veach 1997 §9.2.2] — unbiased for E1 and never zero for a visible VPL.
+E1 is estimated by tracing the VPL's own emission one bounce to the camera
+(:func:`estimate_e1_light_tracing`), with the budget of M samples per VPL shared out by a
+pilot so that VPLs whose light rarely reaches the camera get more
+(:func:`estimate_e1_allocated`): 1/Ê1 has a Jensen bias E[1/Ê1] ≈ (1/E1)(1 + c_v/N_v) that
+made the VPL image up to 25 % too bright in the S-corridor with 256 samples per VPL
+(benchmarks/results/e1_bias.md). Where nothing is found, M shading points drawn from a
+mixture of the whole window and a neighbourhood of the VPL's home pixel (where the VPL
+certainly shines), one-sample MIS over the mixture [Veach 1997 §9.2.2] (:func:`estimate_e1`).
 The shading uses the *same* BRDF, visibility and geometry clamp as the final gather, as
-the rule in algorithm.md §D.4 requires; 1/Ê1 has a small Jensen bias that shrinks with M.
+the rule in algorithm.md §D.4 requires, and E1 is the sum of *pixel values* — integrals
+over the pixel — which the gather estimates with jittered shading points
+(:func:`build_gbuffer`).
 """
 from __future__ import annotations
 
@@ -53,11 +60,18 @@ class GBuffer:
 
 
 def build_gbuffer(scene: BuiltScene, samples: int, rng: np.random.Generator) -> tuple[GBuffer, NDArray]:
-    """Trace ``samples`` jittered camera rays per window pixel; returns the G-buffer and rays' d."""
+    """Trace ``samples`` jittered camera rays per window pixel; returns the G-buffer and rays' d.
+
+    Jittered also for one sample per pixel: the pixel value is then an unbiased estimate of
+    the pixel's integral — what the rough BDPT image (P) and the light-traced Ê1 measure. A
+    point at the pixel centre samples the image instead, which misses or over-weights
+    sub-pixel light (a VPL lighting a sliver beside a silhouette) and biased the VPL image
+    energy by −12 % (Cornell box) to +11 % (door scene) (benchmarks/results/e1_bias.md).
+    """
     w = scene.camera.window
     pix = np.repeat(np.arange(w.n_pixels), samples)
     raster = w.raster(pix).astype(np.float64)
-    raster += rng.random((len(pix), 2)) if samples > 1 else 0.5
+    raster += rng.random((len(pix), 2))
     o, d = scene.camera.generate_rays(raster)
     surf = scene.intersect(o, d)
     wo = -d
@@ -126,12 +140,23 @@ class VPLSet:
         return len(self.count)
 
 
-def _chunks(V: int, n_samples: int, chunk: int):
-    """Yield (v, vv, s): VPL ids of a chunk, each repeated ``n_samples`` times, and its start."""
-    per = max(1, chunk // n_samples)
-    for s in range(0, V, per):
-        v = np.arange(s, min(V, s + per))
-        yield v, np.repeat(v, n_samples), s
+def _chunks(V: int, n_samples, chunk: int):
+    """Yield (v, vv, s): VPL ids of a chunk, each repeated ``n_samples`` times (an int, or
+    (V,) counts per VPL), and its start; a chunk holds about ``chunk`` samples (≥ 1 VPL)."""
+    if np.ndim(n_samples) == 0:
+        per = max(1, chunk // int(n_samples))
+        for s in range(0, V, per):
+            v = np.arange(s, min(V, s + per))
+            yield v, np.repeat(v, n_samples), s
+        return
+    counts = np.asarray(n_samples, np.int64)
+    cum = np.concatenate([[0], np.cumsum(counts)])
+    s = 0
+    while s < V:
+        e = max(s + 1, int(np.searchsorted(cum, cum[s] + chunk, side="right")) - 1)
+        v = np.arange(s, min(V, e))
+        yield v, np.repeat(v, counts[v]), s
+        s = min(V, e)
 
 
 def estimate_e1(scene: BuiltScene, g: GBuffer, window: Window, pos: NDArray, normal: NDArray,
@@ -166,7 +191,7 @@ def estimate_e1(scene: BuiltScene, g: GBuffer, window: Window, pos: NDArray, nor
 
 def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, color: NDArray,
                               gmax: float, n_samples: int, rng: np.random.Generator,
-                              chunk: int = 1 << 18, keep_going=None) -> NDArray:
+                              chunk: int = 1 << 18, keep_going=None, moments: bool = False):
     """(V,) Ê1 by tracing the VPL's own cosine emission one bounce to the camera.
 
     E1 = ∫_Ω f_r(y)·cosθ_v·|n_g(y)·ω_cam|·F(y)·V dω with F = 1/(A_pix·cos³θ·d_cam²) the
@@ -175,11 +200,13 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
     for the geometry clamp. Bounded for diffuse receivers away from the lens, unlike
     sampling pixels, whose samples near the VPL carry the 1/d² peak.
     ``keep_going(fraction) -> bool`` is called after each chunk; False stops (the rest stay 0).
+    With ``moments``, returns (Ê1, (V,) mean of the squared samples) instead.
     """
     from ...sampling import coordinate_system, sample_cosine_hemisphere, to_world
     cam = scene.camera
     V = len(pos)
     total = np.zeros(V)
+    total2 = np.zeros(V)
     for v, vv, s in _chunks(V, n_samples, chunk):
         n = len(vv)
         local = sample_cosine_hemisphere(rng.random((n, 2)))
@@ -216,10 +243,78 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
                     cam_pos = np.broadcast_to(cam.position, (len(good), 3)).copy()
                     vis = scene.tracer.visible(yk.p[good], ng[good], cam_pos, None)
                     val[h[k[good]]] = contrib[good] * vis
-        total[v] = np.bincount(vv - s, weights=val, minlength=len(v)) / n_samples
+        ns = n_samples if np.ndim(n_samples) == 0 else np.maximum(np.asarray(n_samples)[v], 1)
+        total[v] = np.bincount(vv - s, weights=val, minlength=len(v)) / ns
+        total2[v] = np.bincount(vv - s, weights=val * val, minlength=len(v)) / ns
         if keep_going is not None and not keep_going((s + len(v)) / V):
             break
-    return total
+    return (total, total2) if moments else total
+
+
+def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, color: NDArray,
+                          weight: NDArray, gmax: float, n_samples: int, rng: np.random.Generator,
+                          chunk: int = 1 << 18, keep_going=None, pilot: float = 0.25,
+                          max_factor: int = 16) -> NDArray:
+    """(V,) Ê1 by light tracing with the budget ``n_samples``·V spent where 1/Ê1 is biased.
+
+    The normalisation divides by Ê1, and E[1/Ê1] ≈ (1/E1)(1 + c_v/N_v) (Jensen; c_v the
+    relative variance of one sample, N_v the samples): VPLs whose emission rarely reaches a
+    camera-visible point (few hits) carry most of that bias — the S-corridor's VPLs around
+    the bend: +5..+9 % of the image energy with 256 samples each (benchmarks/results/
+    e1_bias.md). A pilot of ``pilot``·n_samples samples per VPL estimates c_v (only); the
+    rest of the budget is then given ∝ sqrt(weight_v·c_v) — which minimises the weighted
+    bias Σ weight_v·c_v/N_v — at least the pilot's count and at most ``max_factor``·n_samples
+    per VPL, and Ê1 is the mean of these second samples alone, so it stays unbiased (the
+    allocation depends on the pilot only). VPLs whose pilot found nothing get the most.
+    ``keep_going`` as in :func:`estimate_e1_light_tracing` (fractions over both stages).
+    """
+    V = len(pos)
+    n1 = max(4, int(round(n_samples * pilot)))
+    if V == 0 or n_samples <= 2 * n1:
+        return estimate_e1_light_tracing(scene, pos, normal, color, gmax, n_samples, rng, chunk, keep_going)
+    f1 = n1 / n_samples
+    stop = [False]
+
+    def stage(lo, hi):
+        if keep_going is None:
+            return None
+
+        def kg(f):
+            ok = keep_going(lo + (hi - lo) * f)
+            stop[0] |= not ok
+            return ok
+        return kg
+
+    m, m2 = estimate_e1_light_tracing(scene, pos, normal, color, gmax, n1, rng, chunk,
+                                      stage(0.0, f1), moments=True)
+    if stop[0]:
+        return np.zeros(V)
+    hit = m > 0
+    c = np.where(hit, np.maximum(m2 - m * m, 0.0) / np.where(hit, m * m, 1.0), np.nan)
+    c = np.where(hit, c, np.nanmax(c, initial=0.0) if hit.any() else 1.0)   # nothing found: the most
+    budget = (n_samples - n1) * V
+    hi = max_factor * n_samples
+    want = np.sqrt(np.maximum(weight, 0.0) * c)
+    counts = np.full(V, n1, np.int64)
+    if want.sum() > 0:
+        # water-fill: scale so that Σ clip(t·want, n1, hi) = budget
+        lo_t, hi_t = 0.0, 1.0
+        while np.clip(hi_t * want, n1, hi).sum() < budget and hi_t < 1e30:
+            hi_t *= 2.0
+        for _ in range(60):
+            t = 0.5 * (lo_t + hi_t)
+            if np.clip(t * want, n1, hi).sum() < budget:
+                lo_t = t
+            else:
+                hi_t = t
+        counts = np.clip(lo_t * want, n1, hi).astype(np.int64)
+    e1 = estimate_e1_light_tracing(scene, pos, normal, color, gmax, counts, rng, chunk, stage(f1, 1.0))
+    # Found nothing: once more with the largest count (before the pixel-mixture estimate of
+    # make_vpls, whose rare tiny values made single VPLs several % of the image energy).
+    miss = np.flatnonzero(e1 <= 0)
+    if len(miss) and not stop[0] and (keep_going is None or keep_going(1.0)):
+        e1[miss] = estimate_e1_light_tracing(scene, pos[miss], normal[miss], color[miss], gmax, hi, rng, chunk)
+    return e1
 
 
 def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gmax: float,
@@ -236,7 +331,8 @@ def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gm
     y = luminance(color)
     color = np.where(y[:, None] > 0, color / np.where(y > 0, y, 1.0)[:, None], 0.0)
     emitter = chains.emitter[used] if chains.emitter is not None else np.zeros(len(count), bool)
-    e1 = estimate_e1_light_tracing(scene, pos, normal, color, gmax, n_samples, rng, chunk, keep_going)
+    e1 = estimate_e1_allocated(scene, pos, normal, color, count.astype(np.float64), gmax, n_samples,
+                               rng, chunk, keep_going)
     miss = e1 <= 0
     # The emission found no camera-visible point: sample pixels instead (unless stopped).
     if miss.any() and (keep_going is None or keep_going(1.0)):

@@ -283,6 +283,18 @@ def _draw_node_view(layout, id_block, output_type: str, input_name: str) -> None
     layout.template_node_view(ntree, node, socket)
 
 
+def _draw_surface(layout, idblock, output: str, color_prop: str, color_text: str | None) -> None:
+    """The Surface panel of a material or world: its node tree's ``output`` node, or
+    (without nodes) the use-nodes toggle and the plain colour ``color_prop``."""
+    if compat.uses_nodes(idblock):
+        _draw_node_view(layout, idblock, output, "Surface")
+        return
+    layout.use_property_split = True
+    if not compat.USE_NODES_DEPRECATED:
+        layout.prop(idblock, "use_nodes", icon="NODETREE")
+    layout.prop(idblock, color_prop, **({"text": color_text} if color_text else {}))
+
+
 class ERCUTS_MATERIAL_PT_surface(ErcutsPanel, bpy.types.Panel):
     bl_label = "Surface"
     bl_context = "material"
@@ -292,15 +304,7 @@ class ERCUTS_MATERIAL_PT_surface(ErcutsPanel, bpy.types.Panel):
         return context.material is not None and super().poll(context)
 
     def draw(self, context):
-        mat = context.material
-        if compat.uses_nodes(mat):
-            _draw_node_view(self.layout, mat, "OUTPUT_MATERIAL", "Surface")
-        else:
-            layout = self.layout
-            layout.use_property_split = True
-            if not compat.USE_NODES_DEPRECATED:
-                layout.prop(mat, "use_nodes", icon="NODETREE")
-            layout.prop(mat, "diffuse_color", text="Color")
+        _draw_surface(self.layout, context.material, "OUTPUT_MATERIAL", "diffuse_color", "Color")
 
 
 class ERCUTS_WORLD_PT_surface(ErcutsPanel, bpy.types.Panel):
@@ -312,15 +316,7 @@ class ERCUTS_WORLD_PT_surface(ErcutsPanel, bpy.types.Panel):
         return context.world is not None and super().poll(context)
 
     def draw(self, context):
-        world = context.world
-        if compat.uses_nodes(world):
-            _draw_node_view(self.layout, world, "OUTPUT_WORLD", "Surface")
-        else:
-            layout = self.layout
-            layout.use_property_split = True
-            if not compat.USE_NODES_DEPRECATED:
-                layout.prop(world, "use_nodes", icon="NODETREE")
-            layout.prop(world, "color")
+        _draw_surface(self.layout, context.world, "OUTPUT_WORLD", "color", None)
 
 
 # --------------------------------------------------------------------------- light

@@ -51,6 +51,10 @@ class _Builder:
     def mesh(self) -> MeshTable:
         return MeshTable(np.concatenate(self.pos), np.concatenate(self.tris), self.mat, self.obj)
 
+    def description(self, materials: MaterialTable, camera: CameraDesc) -> SceneDescription:
+        """The scene: this mesh and its object names, ``materials`` and ``camera``."""
+        return SceneDescription(self.mesh(), materials, camera, object_names=tuple(self.names))
+
 
 def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
     """(4, 4) world_from_camera for a camera at ``eye`` looking at ``target`` (−Z forward, +Y up)."""
@@ -122,7 +126,7 @@ def s_corridor(width: int = 160, height: int = 120) -> SceneDescription:
     mats = MaterialTable(["Wall", "Lamp"], [[0.75, 0.75, 0.75], [0.8, 0.8, 0.8]], [1, 1], [0, 0],
                          [0, 0], [[0, 0, 0], [1500.0, 1400.0, 1200.0]])
     cam = _camera((5.9, 1.25, 5.0), (0.0, 1.25, 5.0), width, height, lens=20.0)
-    return SceneDescription(b.mesh(), mats, cam, object_names=tuple(b.names))
+    return b.description(mats, cam)
 
 
 def icosphere(level: int = 2) -> tuple[np.ndarray, np.ndarray]:
@@ -203,12 +207,13 @@ def closed_room(width: int = 48, height: int = 36) -> SceneDescription:
 
 
 def _diffuse_table(rows) -> MaterialTable:
-    """Material table from (name, base colour, emission) rows: Lambert only (roughness 1,
-    specular 0), i.e. Blender's Diffuse BSDF, or a Principled emitter without specular."""
+    """Material table from (name, base colour[, emission]) rows (no emission: black):
+    Lambert only (roughness 1, specular 0), i.e. Blender's Diffuse BSDF, or a Principled
+    emitter without specular."""
     names = [r[0] for r in rows]
     n = len(rows)
     return MaterialTable(names, [r[1] for r in rows], np.ones(n), np.zeros(n), np.zeros(n),
-                         [r[2] for r in rows])
+                         [r[2] if len(r) > 2 else [0, 0, 0] for r in rows])
 
 
 def _hinged_panel(b: _Builder, hinge, width: float, height: float, thickness: float,
@@ -254,12 +259,12 @@ def door_ajar(width: int = 160, height: int = 120) -> SceneDescription:
     light = b.object("HallLamp")
     b.quad((4.5, H - 0.01, 2.5), (5.5, H - 0.01, 2.5), (5.5, H - 0.01, 3.5), (4.5, H - 0.01, 3.5),
            lamp, light)
-    mats = _diffuse_table([("Wall", [0.75, 0.75, 0.75], [0, 0, 0]),
-                           ("Rug", [0.55, 0.25, 0.15], [0, 0, 0]),
-                           ("Door", [0.6, 0.5, 0.35], [0, 0, 0]),
+    mats = _diffuse_table([("Wall", [0.75, 0.75, 0.75]),
+                           ("Rug", [0.55, 0.25, 0.15]),
+                           ("Door", [0.6, 0.5, 0.35]),
                            ("Lamp", [0.8, 0.8, 0.8], [400.0, 380.0, 340.0])])
     cam = _camera((0.4, 1.5, 0.4), (4.0, 0.9, 2.6), width, height, lens=18.0)
-    return SceneDescription(b.mesh(), mats, cam, object_names=tuple(b.names))
+    return b.description(mats, cam)
 
 
 def baffled_lamp(width: int = 160, height: int = 120) -> SceneDescription:
@@ -279,12 +284,12 @@ def baffled_lamp(width: int = 160, height: int = 120) -> SceneDescription:
     b.box((0.6, 0, -0.4), (1.6, 0.75, 0.4), wood, b.object("Table"))
     y = H - 0.1
     b.quad((-0.3, y, -0.3), (0.3, y, -0.3), (0.3, y, 0.3), (-0.3, y, 0.3), lamp, b.object("Lamp"))
-    mats = _diffuse_table([("Wall", [0.8, 0.8, 0.8], [0, 0, 0]),
-                           ("Blue", [0.2, 0.3, 0.6], [0, 0, 0]),
-                           ("Wood", [0.6, 0.4, 0.2], [0, 0, 0]),
+    mats = _diffuse_table([("Wall", [0.8, 0.8, 0.8]),
+                           ("Blue", [0.2, 0.3, 0.6]),
+                           ("Wood", [0.6, 0.4, 0.2]),
                            ("Lamp", [0.8, 0.8, 0.8], [200.0, 190.0, 170.0])])
     cam = _camera((0.0, 1.3, 1.95), (0.0, 1.1, -2.0), width, height, lens=16.0)
-    return SceneDescription(b.mesh(), mats, cam, object_names=tuple(b.names))
+    return b.description(mats, cam)
 
 
 def directly_lit(width: int = 160, height: int = 120) -> SceneDescription:
@@ -301,12 +306,12 @@ def directly_lit(width: int = 160, height: int = 120) -> SceneDescription:
     b.box((0.2, 0, -1.2), (0.8, 1.4, -0.6), white, b.object("TallBlock"))
     b.box((0.5, 0, 0.3), (1.3, 0.4, 1.1), white, b.object("LowBlock"))
     b.quad((-1, 3, -1), (-1, 3, 1), (1, 3, 1), (1, 3, -1), lamp, b.object("Lamp"))
-    mats = _diffuse_table([("Floor", [0.5, 0.5, 0.5], [0, 0, 0]),
-                           ("Red", [0.7, 0.15, 0.1], [0, 0, 0]),
-                           ("White", [0.75, 0.75, 0.75], [0, 0, 0]),
+    mats = _diffuse_table([("Floor", [0.5, 0.5, 0.5]),
+                           ("Red", [0.7, 0.15, 0.1]),
+                           ("White", [0.75, 0.75, 0.75]),
                            ("Lamp", [0.8, 0.8, 0.8], [5.0, 4.8, 4.4])])
     cam = _camera((0.0, 2.2, 4.2), (0.0, 0.3, 0.0), width, height, lens=28.0)
-    return SceneDescription(b.mesh(), mats, cam, object_names=tuple(b.names))
+    return b.description(mats, cam)
 
 
 SCENES = {"closed_room": closed_room, "s_corridor": s_corridor, "cornell_box": cornell_box, "furnace": furnace,

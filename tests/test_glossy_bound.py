@@ -28,20 +28,9 @@ from ercuts_core.sampling import luminance
 ROUGHNESS = (0.05, 0.1, 0.2, 0.35, 0.5)
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=1, keepdims=True)
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.einsum("ij,ij->i", a, b)
-
-
-def random_vpls(n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    pos = rng.random((n, 3)) * 4.0 - 2.0
-    nrm = _unit(rng.normal(size=(n, 3)))
-    inten = rng.random((n, 3)) * rng.lognormal(0.0, 1.0, (n, 1))
-    return pos, nrm, inten
+from ercuts_core.vecmath import dot as _dot
+from tests.vpl_cases import random_vpls
+from tests.vpl_cases import unit as _unit
 
 
 def random_wo(nrm: np.ndarray, rng: np.random.Generator) -> np.ndarray:

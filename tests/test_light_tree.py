@@ -7,18 +7,12 @@ from scipy.stats import binomtest, chisquare
 
 from ercuts_core.integrators.ercuts.light_tree import LightTree, build_light_tree, cone_union
 from ercuts_core.sampling import luminance
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=1, keepdims=True)
+from tests.vpl_cases import random_vpls as _random_vpls
+from tests.vpl_cases import unit as _unit
 
 
 def random_vpls(n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    pos = rng.random((n, 3)) * [4.0, 3.0, 2.0]
-    nrm = _unit(rng.normal(size=(n, 3)))
-    inten = rng.random((n, 3)) * rng.lognormal(0.0, 1.0, (n, 1))
-    return pos, nrm, inten
+    return _random_vpls(n, seed, scale=np.array([4.0, 3.0, 2.0]), shift=0.0)
 
 
 def coincident_vpls() -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -17,22 +17,9 @@ from ercuts_core.integrators.ercuts.lightcuts import (
     lightcut,
 )
 from ercuts_core.sampling import luminance
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=1, keepdims=True)
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.einsum("ij,ij->i", a, b)
-
-
-def random_vpls(n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    pos = rng.random((n, 3)) * 4.0 - 2.0
-    nrm = _unit(rng.normal(size=(n, 3)))
-    inten = rng.random((n, 3)) * rng.lognormal(0.0, 1.0, (n, 1))
-    return pos, nrm, inten
+from ercuts_core.vecmath import dot as _dot
+from tests.vpl_cases import random_vpls
+from tests.vpl_cases import unit as _unit
 
 
 def diffuse_points(n: int, seed: int, transmissive: bool = False,
@@ -343,15 +330,16 @@ def test_select_band_prefilter_matches_full_sort():
     from ercuts_core.integrators.ercuts.lightcuts import _Entries, _select
 
     def reference(e, err, thr, budget, band):
-        cand = np.flatnonzero(err > thr)
-        cand = cand[np.lexsort((-err[cand], e.pt[cand]))]
-        grp = e.pt[cand]
-        first = np.searchsorted(grp, grp, side="left")
-        rank = np.arange(cand.size) - first
-        keep = rank < budget[grp]
-        if band > 0.0:
-            keep &= (err[cand] >= band * err[cand[first]]) | (rank == 0)
-        return cand[keep]
+        """Point by point: the candidates (err > thr) by decreasing error (ties: entry
+        order), the first budget[p], and with a band only those within band·(largest)."""
+        out = []
+        for p in range(len(budget)):
+            mine = [i for i in range(len(err)) if e.pt[i] == p and err[i] > thr[i]]
+            mine.sort(key=lambda i: -err[i])                # stable: ties keep entry order
+            for rank, i in enumerate(mine[:budget[p]]):
+                if band == 0.0 or rank == 0 or err[i] >= band * err[mine[0]]:
+                    out.append(i)
+        return np.array(out, np.int64)
 
     rng = np.random.default_rng(5)
     for trial in range(20):

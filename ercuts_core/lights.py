@@ -255,20 +255,16 @@ class LightSet:
             Li[m] = self.sun_E[i]
             pdf_area[m] = 1.0 / (np.pi * self.radius**2)
             pdf_dir[m] = 1.0
-        m = kind == AREA
-        if m.any():
-            i = loc[m]
-            p[m] = self._area_point(i, u[m])
-            nl[m] = self.ar_n[i]
-            Lsurf[m] = self.ar_L[i]
-            pdf_area[m] = 1.0 / self.ar_area[i]
-        m = kind == TRI
-        if m.any():
-            i = loc[m]
-            p[m] = self._tri_point(i, u[m])
-            nl[m] = self.tri_n[i]
-            Lsurf[m] = self.tri_L[i]
-            pdf_area[m] = 1.0 / self.tri_area[i]
+        surfaces = ((AREA, self._area_point, self.ar_n, self.ar_L, self.ar_area),
+                    (TRI, self._tri_point, self.tri_n, self.tri_L, self.tri_area))
+        for surface_kind, point, normal, radiance, area in surfaces:   # uniform in area
+            m = kind == surface_kind
+            if m.any():
+                i = loc[m]
+                p[m] = point(i, u[m])
+                nl[m] = normal[i]
+                Lsurf[m] = radiance[i]
+                pdf_area[m] = 1.0 / area[i]
         m = kind == ENV
         if m.any():
             w = sample_uniform_sphere(u[m])

@@ -159,6 +159,12 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
                      "gather each time), averaged; 0 = as many as the time limit allows"),
         default=_default("iterations", 1), min=0, soft_max=256,
     )
+    iteration_start: IntProperty(
+        name="First Iteration",
+        description=("Index of the first iteration rendered: renders of the same frame with "
+                     "different first iterations can be averaged"),
+        default=_default("iteration_start", 0), min=0,
+    )
     chains_per_pixel: FloatProperty(
         name="Chains per Pixel",
         description="Average number of energy-redistribution chains started per pixel",

@@ -164,6 +164,7 @@ class ERCUTS_RENDER_PT_ercuts_advanced(ErcutsPanel, bpy.types.Panel):
         layout.prop(settings, "gather")
         layout.prop(settings, "lightcut_error")
         layout.prop(settings, "tree_pairing")
+        layout.prop(settings, "iteration_start")
         col = layout.column(align=True)
         col.prop(settings, "shading_samples")
         col.prop(settings, "e1_samples")

@@ -74,7 +74,7 @@ def capture(desc, settings, centre=False):
                    home=home)
         return vpls
 
-    def gbuf(scene, samples, rng):
+    def gbuf(scene, samples, rng, **_):
         return orig_g(scene, samples, _Centre() if samples == 1 else rng)
 
     integ_mod.make_vpls = wrapper

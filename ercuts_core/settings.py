@@ -58,6 +58,9 @@ class RenderSettings:
             rough BDPT, chains, VPLs, tree and gather; seed and VPL clamp from the iteration
             index), averaged (:mod:`~ercuts_core.integrators.ercuts.progressive`); 0 = as many
             as ``time_limit`` allows (one without a time limit).
+        iteration_start: index of the first iteration rendered (iterations
+            ``iteration_start`` … ``iteration_start + iterations − 1``), so that a frame's
+            iterations can be split over several renders and averaged.
         chains_per_pixel: average number of ER chains started per pixel (c).
         chain_length: mutation steps per chain (N); every step deposits P/n.
         lens_perturbation, caustic_perturbation, multichain_perturbation (inactive: it needs
@@ -102,6 +105,7 @@ class RenderSettings:
     threads: int = 0
     max_error: float = 0.02
     iterations: int = 1
+    iteration_start: int = 0
     chains_per_pixel: float = 0.25
     chain_length: int = 100
     lens_perturbation: bool = True
@@ -143,6 +147,8 @@ class RenderSettings:
             raise ValueError(f"unknown direct_light {self.direct_light!r}; expected one of {DIRECT_LIGHTS}")
         if not 0 < self.max_error < 1:
             raise ValueError(f"max_error must be in (0, 1), got {self.max_error}")
+        if self.iteration_start < 0:
+            raise ValueError(f"iteration_start must be >= 0, got {self.iteration_start}")
         if self.iterations < 0:
             raise ValueError(f"iterations must be >= 0 (0 = until the time limit), got {self.iterations}")
         if self.chains_per_pixel <= 0 or self.chain_length < 1:

@@ -31,16 +31,43 @@ def test_iteration_seeds_and_clamps():
     assert (iteration_target(3, False), iteration_target(0, True), iteration_target(0, False)) == (3, None, 1)
     with pytest.raises(ValueError, match="iterations"):
         RenderSettings(iterations=-1)
+    with pytest.raises(ValueError, match="iteration_start"):
+        RenderSettings(iteration_start=-1)
+
+
+def test_stratified_shading_positions():
+    """Each iteration's shading position is uniform in the pixel (the Cranley-Patterson
+    rotation), and over 16 iterations a pixel's positions fill its quadrants evenly (2–6
+    each in every pixel, measured), where independent uniform positions leave a quadrant
+    with fewer than 2 or more than 6 in about half the pixels."""
+    from ercuts_core.integrators.ercuts.progressive import stratified_jitter
+
+    n = 4000
+    first = stratified_jitter(n, 1, seed=9, k=0)
+    assert first.shape == (n, 2) and (first >= 0).all() and (first < 1).all()
+    assert abs(first.mean() - 0.5) < 3 * np.sqrt(1 / 12 / (2 * n))
+    pts = np.stack([stratified_jitter(n, 1, seed=9, k=k) for k in range(16)], axis=1)   # (n, 16, 2)
+    quad = (pts[..., 0] >= 0.5) * 2 + (pts[..., 1] >= 0.5)
+    counts = np.stack([(quad == q).sum(axis=1) for q in range(4)], axis=1)
+    assert counts.min() >= 2 and counts.max() <= 6
+    rng = np.random.default_rng(1)
+    rand = (rng.random((n, 16, 2)) >= 0.5)
+    rq = np.stack([((rand[..., 0] * 2 + rand[..., 1]) == q).sum(axis=1) for q in range(4)], axis=1)
+    assert np.mean((rq.min(axis=1) < 2) | (rq.max(axis=1) > 6)) > 0.3
+    # samples per pixel continue the sequence: iteration 1 with 2 samples = elements 2 and 3
+    two = stratified_jitter(n, 2, seed=9, k=1).reshape(n, 2, 2)
+    np.testing.assert_allclose(two[:, 1], stratified_jitter(n, 1, seed=9, k=3), atol=1e-12)
 
 
 def test_iterations_are_the_average_of_independent_renders():
-    """Three iterations = the mean of the three one-iteration renders with the iterations'
-    seeds and clamps (each a deterministic function of (seed, k)), to float32 rounding."""
+    """Three iterations = the mean of three one-iteration renders of iterations 0, 1, 2
+    (``iteration_start``: each a deterministic function of (seed, k), so a frame's
+    iterations can be rendered apart and merged), to float32 rounding."""
     desc = closed_room(24, 18)
     base = RenderSettings(**FAST, seed=3)
     three = render(desc, base.replace(iterations=3))
     assert three.stats["iterations"] == 3 and not three.cancelled
-    singles = [render(desc, iteration_settings(base, k)).image.astype(np.float64) for k in range(3)]
+    singles = [render(desc, base.replace(iteration_start=k)).image.astype(np.float64) for k in range(3)]
     np.testing.assert_allclose(three.image, np.mean(singles, axis=0), rtol=2e-6, atol=1e-7)
     assert three.stats["clamp_last_iteration"] == pytest.approx(iteration_clamp(base.clamp, 2))
     again = render(desc, base.replace(iterations=3))

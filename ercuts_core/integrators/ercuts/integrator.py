@@ -89,7 +89,7 @@ from .initialization import indirect_energy, rough_image_energy, seeds_from_path
 from .light_tree import build_light_tree
 from .mutations import INACTIVE, NAMES, MutationContext
 from .pacing import Schedule
-from .progressive import iteration_settings, iteration_target, more_iterations
+from .progressive import iteration_settings, iteration_target, more_iterations, stratified_jitter
 from .paths import PathBatch
 from .seeding import seed_paths
 from .vpl import GBuffer, build_gbuffer, g_clamp, make_vpls
@@ -124,7 +124,8 @@ class ErcutsIntegrator:
         k, durations = 0, []
         while True:
             t0 = time.perf_counter()
-            self.settings = iteration_settings(base, k)
+            index = base.iteration_start + k
+            self.settings, self.iteration, self.base_seed = iteration_settings(base, index), index, base.seed
             part = film if k == 0 else Film(window)
             it_timings, it_stats = (timings, stats) if k == 0 else ({}, {})
             span = None if target is None else (k / target, (k + 1) / target)
@@ -174,7 +175,9 @@ class ErcutsIntegrator:
             with self._phase("direct"):
                 base, alpha = self._direct_light()
         with self._phase("seeds"):
-            g, _ = build_gbuffer(self.scene, s.shading_samples, rng)
+            window = self.scene.camera.window
+            jitter = stratified_jitter(window.n_pixels, s.shading_samples, self.base_seed, self.iteration)
+            g, _ = build_gbuffer(self.scene, s.shading_samples, rng, jitter)
             if s.direct_vpls:
                 base, alpha = self._direct_image(g, rng), self._alpha(g)
                 P = max(P_all - float(luminance(base.sum(axis=0)).sum()), 0.0)

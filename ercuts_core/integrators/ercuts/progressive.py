@@ -39,11 +39,30 @@ def iteration_clamp(clamp: float, k: int) -> float:
 
 
 def iteration_settings(settings: RenderSettings, k: int) -> RenderSettings:
-    """``settings`` for iteration ``k``: its seed and clamp (the same object for k = 0)."""
+    """``settings`` for iteration ``k``: its seed and clamp (the same object for k = 0); the
+    shading positions come from :func:`stratified_jitter` with the render's seed and k."""
     if k == 0:
         return settings
     return settings.replace(seed=iteration_seed(settings.seed, k),
                             clamp=iteration_clamp(settings.clamp, k))
+
+
+#: The R2 sequence's step (Roberts 2018): (1/g, 1/g²) with g the plastic number, the real
+#: root of x³ = x + 1; its points fill the unit square with low discrepancy.
+_PLASTIC = 1.324717957244746
+R2_STEP = np.array([1.0 / _PLASTIC, 1.0 / _PLASTIC**2])
+
+
+def stratified_jitter(n_pixels: int, samples: int, seed: int, k: int) -> np.ndarray:
+    """(n_pixels·samples, 2) positions in the pixel for the shading points of iteration ``k``:
+    point j of iteration k is element k·samples + j of the R2 sequence, rotated per pixel
+    by a uniform random offset (Cranley-Patterson rotation, fixed by ``seed`` for the whole
+    render). Each position is uniform in the pixel (the gather stays an unbiased estimate of
+    the pixel integral), and over the iterations a pixel's positions are spread evenly, so
+    the average anti-aliases edges faster than independent jitter."""
+    rot = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0x57A7]).random((n_pixels, 1, 2))
+    index = (k * samples + np.arange(samples, dtype=np.float64))[None, :, None]
+    return ((rot + index * R2_STEP) % 1.0).reshape(-1, 2)
 
 
 def iteration_target(iterations: int, time_limited: bool) -> int | None:

@@ -59,8 +59,13 @@ class GBuffer:
     samples: int
 
 
-def build_gbuffer(scene: BuiltScene, samples: int, rng: np.random.Generator) -> tuple[GBuffer, NDArray]:
+def build_gbuffer(scene: BuiltScene, samples: int, rng: np.random.Generator,
+                  jitter: NDArray | None = None) -> tuple[GBuffer, NDArray]:
     """Trace ``samples`` jittered camera rays per window pixel; returns the G-buffer and rays' d.
+
+    ``jitter``: (n_pixels·samples, 2) positions in the pixel, in [0, 1)² (default: uniform
+    random from ``rng``; progressive renders pass stratified ones,
+    :func:`~.progressive.stratified_jitter`).
 
     Jittered also for one sample per pixel: the pixel value is then an unbiased estimate of
     the pixel's integral — what the rough BDPT image (P) and the light-traced Ê1 measure. A
@@ -71,7 +76,7 @@ def build_gbuffer(scene: BuiltScene, samples: int, rng: np.random.Generator) -> 
     w = scene.camera.window
     pix = np.repeat(np.arange(w.n_pixels), samples)
     raster = w.raster(pix).astype(np.float64)
-    raster += rng.random((len(pix), 2))
+    raster += rng.random((len(pix), 2)) if jitter is None else jitter
     o, d = scene.camera.generate_rays(raster)
     surf = scene.intersect(o, d)
     wo = -d

@@ -73,6 +73,12 @@ class ErcutsPanel:
         return context.engine in cls.COMPAT_ENGINES
 
 
+class ErcutsClosedPanel(ErcutsPanel):
+    """Mix-in: an Ercuts panel that starts collapsed."""
+
+    bl_options = {"DEFAULT_CLOSED"}
+
+
 # --------------------------------------------------------------------------- render tab
 
 class ERCUTS_RENDER_PT_sampling(ErcutsPanel, bpy.types.Panel):
@@ -148,13 +154,12 @@ class ERCUTS_RENDER_PT_mutations(ErcutsPanel, bpy.types.Panel):
         col.prop(settings, "bidirectional_mutation", text="Bidirectional")
 
 
-class ERCUTS_RENDER_PT_ercuts_advanced(ErcutsPanel, bpy.types.Panel):
+class ERCUTS_RENDER_PT_ercuts_advanced(ErcutsClosedPanel, bpy.types.Panel):
     """Seeding, gather and normalisation details (ERCUTS only)."""
 
     bl_label = "Advanced"
     bl_context = "render"
     bl_parent_id = "ERCUTS_RENDER_PT_ercuts"
-    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         layout, settings = _settings_layout(self.layout, context)
@@ -170,22 +175,20 @@ class ERCUTS_RENDER_PT_ercuts_advanced(ErcutsPanel, bpy.types.Panel):
         col.prop(settings, "e1_samples")
 
 
-class ERCUTS_RENDER_PT_film(ErcutsPanel, bpy.types.Panel):
+class ERCUTS_RENDER_PT_film(ErcutsClosedPanel, bpy.types.Panel):
     bl_label = "Film"
     bl_context = "render"
-    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         layout, settings = _settings_layout(self.layout, context)
         layout.prop(settings, "film_transparent")
 
 
-class ERCUTS_RENDER_PT_denoising(ErcutsPanel, bpy.types.Panel):
+class ERCUTS_RENDER_PT_denoising(ErcutsClosedPanel, bpy.types.Panel):
     """OpenImageDenoise through the compositor (:mod:`.denoise`)."""
 
     bl_label = "Denoising"
     bl_context = "render"
-    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         from . import denoise
@@ -197,10 +200,9 @@ class ERCUTS_RENDER_PT_denoising(ErcutsPanel, bpy.types.Panel):
             layout.label(text="No OpenImageDenoise in this Blender", icon="ERROR")
 
 
-class ERCUTS_RENDER_PT_performance(ErcutsPanel, bpy.types.Panel):
+class ERCUTS_RENDER_PT_performance(ErcutsClosedPanel, bpy.types.Panel):
     bl_label = "Performance"
     bl_context = "render"
-    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         layout, settings = _settings_layout(self.layout, context)
@@ -213,12 +215,11 @@ class ERCUTS_RENDER_PT_performance(ErcutsPanel, bpy.types.Panel):
 
 # --------------------------------------------------------------------------- output / view layer
 
-class ERCUTS_OUTPUT_PT_statistics(ErcutsPanel, bpy.types.Panel):
+class ERCUTS_OUTPUT_PT_statistics(ErcutsClosedPanel, bpy.types.Panel):
     """The JSON statistics file written next to each frame (:mod:`.sidecar`)."""
 
     bl_label = "Ercuts Statistics"
     bl_context = "output"
-    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         layout, settings = _settings_layout(self.layout, context)

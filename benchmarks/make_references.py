@@ -23,7 +23,6 @@ import datetime as dt
 import json
 import os
 import sys
-import time
 
 import numpy as np
 

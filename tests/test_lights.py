@@ -6,7 +6,7 @@ import pytest
 
 from ercuts_core import AreaLights, MaterialTable, MeshTable, PointLights, SunLights
 from ercuts_core.description import SHAPE_ELLIPSE, SHAPE_RECT, SceneDescription
-from ercuts_core.lights import AREA, LightSet
+from ercuts_core.lights import AREA
 from ercuts_core.sampling import luminance
 from ercuts_core.scene import BuiltScene
 from ercuts_core.scenes import _camera

@@ -14,7 +14,6 @@ import math
 
 import bpy
 import numpy as np
-import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 import blender_helpers as bh

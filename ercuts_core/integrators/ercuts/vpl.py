@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...arrays import take_rows
-from ...bsdf import Bsdf, bsdf_max_value
+from ...bsdf import Bsdf
 from ...camera import Window
 from ...sampling import luminance
 from ...scene import BuiltScene, Surface
@@ -356,8 +356,3 @@ def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gm
                                                  minlength=window.n_pixels)
     return VPLSet(pos[lit], normal[lit], intensity[lit], count[lit], e1[lit], fallback,
                   emitter[lit], fallback_emitter)
-
-
-def material_bound(scene: BuiltScene, g: GBuffer) -> NDArray:
-    """(Q, 3) upper bound of the BSDF at each shading point (Lightcuts' material bound)."""
-    return bsdf_max_value(scene.materials, g.mat)

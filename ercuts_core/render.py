@@ -19,7 +19,7 @@ from .integrators.base import PREVIEW_INTERVAL, Clock, Integrator, Preview, Prog
 from .integrators.bdpt import BDPTIntegrator
 from .integrators.ercuts import ErcutsIntegrator
 from .integrators.path import PathIntegrator
-from .memory import plan_for
+from .memory import MemoryPlan, plan_for
 from .result import RenderResult
 from .scene import BuiltScene
 from .settings import RenderSettings
@@ -72,10 +72,10 @@ def render(desc: SceneDescription, settings: RenderSettings | None = None,
             _black_pass(film, scene, settings)
         elif settings.integrator == "ERCUTS":
             t0 = time.perf_counter()
-            ErcutsIntegrator(scene, settings).render(film, clock, timings, stats)
+            ErcutsIntegrator(scene, settings, memory).render(film, clock, timings, stats)
             timings["render"] = time.perf_counter() - t0
         else:
-            _integrate(scene, settings, film, clock, timings)
+            _integrate(scene, settings, memory, film, clock, timings)
     finally:
         stats["rays"] = scene.tracer.rays_traced
         scene.close()
@@ -105,11 +105,11 @@ def _black_pass(film: Film, scene: BuiltScene, settings: RenderSettings) -> None
         film.alpha[:] = float(film.passes_done)
 
 
-def _integrate(scene: BuiltScene, settings: RenderSettings, film: Film, clock: Clock,
+def _integrate(scene: BuiltScene, settings: RenderSettings, memory: MemoryPlan, film: Film, clock: Clock,
                timings: dict[str, float]) -> None:
     """Run passes until ``samples`` are done or the user cancels (or the time limit)."""
     t0 = time.perf_counter()
     run_passes(make_integrator(scene, settings), film, clock, samples=settings.samples,
-               batch=batch_pixels(film.window.n_pixels, settings, scene.desc.mesh.n_triangles),
+               batch=batch_pixels(memory, settings),
                phase=settings.integrator)
     timings["render"] = time.perf_counter() - t0

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..film import Film
-from ..memory import plan as memory_plan
+from ..memory import MemoryPlan
 from ..scene import BuiltScene, Surface
 from ..settings import RenderSettings
 
@@ -89,13 +89,13 @@ class Clock:
         return self.deadline - time.perf_counter()
 
 
-def batch_pixels(n_pixels: int, settings: RenderSettings, n_triangles: int = 0) -> int:
-    """Pixels per batch: about ``batch_rays`` rays per bounce for PATH; a quarter of that for
-    BDPT, whose batch holds two subpaths and all their connections (a batch then stays well
-    under a second, so the time limit and cancellation are honoured promptly); smaller when
-    the memory budget asks for it (:func:`ercuts_core.memory.plan`), and at most
-    :func:`progress_batch_pixels`."""
-    return min(memory_plan(n_pixels, n_triangles, settings).batch_pixels, progress_batch_pixels(settings))
+def batch_pixels(memory: MemoryPlan, settings: RenderSettings) -> int:
+    """Pixels per pass batch: the render's memory plan's (about ``batch_rays`` rays per
+    bounce for PATH, a quarter of that for BDPT, whose batch holds two subpaths and all
+    their connections; smaller when the memory budget asks for it,
+    :func:`ercuts_core.memory.plan`), and at most :func:`progress_batch_pixels`, so a batch
+    stays well under a second and the time limit and cancellation are honoured promptly."""
+    return min(memory.batch_pixels, progress_batch_pixels(settings))
 
 
 def progress_batch_pixels(settings: RenderSettings) -> int:

@@ -75,12 +75,12 @@ from numpy.typing import NDArray
 from ...bsdf import Bsdf
 from ...film import Film
 from ...lights import ENV, POINT, SUN
-from ...memory import plan
+from ...memory import MemoryPlan, plan
 from ...sampling import luminance
 from ...scene import BuiltScene
 from ...settings import RenderSettings
 from ...vecmath import dot
-from ..base import Clock, progress_batch_pixels, run_passes
+from ..base import Clock, batch_pixels, progress_batch_pixels, run_passes
 from ..bdpt import BDPTIntegrator
 from ..path import PathIntegrator
 from .er_sampling import chain_starts, run_chains
@@ -107,10 +107,10 @@ class _Stopped(Exception):
 class ErcutsIntegrator:
     """Runs the five phases on a built scene (see the module docstring)."""
 
-    def __init__(self, scene: BuiltScene, settings: RenderSettings):
+    def __init__(self, scene: BuiltScene, settings: RenderSettings, memory: MemoryPlan | None = None):
         self.scene = scene
         self.settings = settings
-        self.memory = plan(scene.camera.window.n_pixels, scene.desc.mesh.n_triangles, settings)
+        self.memory = memory or plan(scene.camera.window.n_pixels, scene.desc.mesh.n_triangles, settings)
 
     # ------------------------------------------------------------------ driver
     def render(self, film: Film, clock: Clock, timings: dict, stats: dict) -> None:
@@ -244,7 +244,7 @@ class ErcutsIntegrator:
         """:func:`~ercuts_core.integrators.base.run_passes` within ``share``'s deadline."""
         s, window = self.settings, self.scene.camera.window
         return run_passes(integrator, Film(window), self.clock, samples=samples,
-                          batch=min(self.memory.batch_pixels, progress_batch_pixels(s)), phase=phase,
+                          batch=batch_pixels(self.memory, s), phase=phase,
                           key=key, fraction=lambda f: self.schedule.fraction(phase, f),
                           deadline=self.schedule.deadline(share), show=show)
 

@@ -122,14 +122,10 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
             print(f"Ercuts: {exc}", flush=True)
             self.report({"ERROR"}, f"Ercuts: {exc}")
         except Exception as exc:  # noqa: BLE001 - every failure must reach the user
-            message = self._error_message(exc)
+            message = error_message(exc)
             print(f"Ercuts: render failed: {message}")
             traceback.print_exc()
             self.report({"ERROR"}, f"Ercuts: {message}")
-
-    @staticmethod
-    def _error_message(exc: Exception) -> str:
-        return error_message(exc)
 
     # ------------------------------------------------------------------ viewport
     def view_update(self, context, depsgraph):
@@ -146,7 +142,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
             viewport.view_draw(self, context, depsgraph)
         except Exception as exc:  # noqa: BLE001 - never a traceback in the UI
             traceback.print_exc()
-            self.update_stats("Ercuts", f"Error: {self._error_message(exc)}")
+            self.update_stats("Ercuts", f"Error: {error_message(exc)}")
 
     def __del__(self):
         session = getattr(self, "_viewport_session", None)

@@ -130,9 +130,15 @@ class Tracer:
 
     def _map(self, fn, n: int):
         parts = self._split(n)
-        if len(parts) == 1:
-            return [fn(parts[0])]
-        return list(self._pool.map(fn, parts))
+        if len(parts) > 1:
+            try:
+                return list(self._pool.map(fn, parts))
+            except RuntimeError:
+                # the pool refuses work once the interpreter shuts down (Python runs
+                # concurrent.futures' exit hook before atexit handlers, so a viewport render
+                # still in flight when Blender quits lands here): trace in this thread
+                pass
+        return [fn(part) for part in parts]
 
     def intersect(self, o: NDArray, d: NDArray, tmax: NDArray | float | None = None) -> Hit:
         """Closest hit along rays ``o + t·d`` with 0 < t < tmax (``d`` unit, float64 (N, 3))."""

@@ -74,6 +74,20 @@ def test_large_batches_are_split_across_threads_consistently():
     assert tr.rays_traced == n
 
 
+def test_a_shut_down_thread_pool_traces_in_the_calling_thread():
+    """At interpreter exit Python shuts the pool before atexit handlers run; a render still in
+    flight (a viewport thread when Blender quits) must finish its batch, not raise."""
+    tr = Tracer(*plane((0, 0, 0)), threads=2)
+    n = 100_000
+    o = np.c_[np.linspace(-2, 2, n), np.ones(n), np.zeros(n)]
+    d = np.tile([0.0, -1.0, 0.0], (n, 1))
+    before = tr.intersect(o, d)
+    tr._pool.shutdown()
+    after = tr.intersect(o, d)
+    np.testing.assert_array_equal(after.prim, before.prim)
+    np.testing.assert_array_equal(tr.occluded(o, d, 2.0), before.valid)
+
+
 def corner(center=0.0):
     """A concave corner: a floor (y = c, normal +y) and a wall (x = c, normal +x) sharing the
     edge x = y = c, z ∈ [c − 1, c + 1] (like a room's floor and wall, or the Cornell box's

@@ -115,7 +115,7 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
     max_depth: IntProperty(
         name="Max Bounces",
         description="Maximum number of bounces of a light path (1 = direct light only)",
-        default=_default("max_depth", 8), min=1, soft_max=64, max=1024,
+        default=_default("max_depth", 64), min=1, soft_max=64, max=1024,
     )
     rr_depth: IntProperty(
         name="Russian Roulette Depth",
@@ -157,7 +157,7 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         name="Iterations",
         description=("Complete Ercuts iterations (chains, virtual point lights, light tree and "
                      "gather each time), averaged; 0 = as many as the time limit allows"),
-        default=_default("iterations", 1), min=0, soft_max=256,
+        default=_default("iterations", 0), min=0, soft_max=256,
     )
     iteration_start: IntProperty(
         name="First Iteration",
@@ -217,7 +217,7 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         name="Lightcut Error",
         description="Which error a lightcut bounds by the threshold",
         items=LIGHTCUT_ERROR_ITEMS,
-        default=_default("lightcut_error", "NODE"),
+        default=_default("lightcut_error", "TOTAL"),
     )
     tree_pairing: EnumProperty(
         name="Tree Pairing",
@@ -251,6 +251,12 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         name="Normalisation Samples",
         description="Shading points per virtual point light used to normalise its intensity",
         default=_default("e1_samples", 256), min=1, soft_max=4096,
+    )
+    normalize_to_p: BoolProperty(
+        name="Normalize to Rough Energy",
+        description=("Ablation: scale the virtual point lights' image so its energy equals the "
+                     "rough bidirectional pass's (hides the normalisation's bias)"),
+        default=_default("normalize_to_p", False),
     )
     memory_budget_mb: IntProperty(
         name="Memory Budget",

@@ -173,6 +173,7 @@ class ERCUTS_RENDER_PT_ercuts_advanced(ErcutsClosedPanel, bpy.types.Panel):
         col = layout.column(align=True)
         col.prop(settings, "shading_samples")
         col.prop(settings, "e1_samples")
+        layout.prop(settings, "normalize_to_p")
 
 
 class ERCUTS_RENDER_PT_film(ErcutsClosedPanel, bpy.types.Panel):

@@ -47,6 +47,9 @@ class RenderSettings:
         samples: samples per pixel (for ERCUTS: of the rough BDPT image of step 1).
         seed: random seed; the same seed and settings give the same image.
         max_depth: maximum number of bounces (path segments − 1); 1 = direct light only.
+            The default 64 keeps the light of deep interiors (8 lost up to 64 % of it in an
+            S-shaped corridor); Russian roulette after ``rr_depth`` bounces ends the paths
+            that carry little, so the cost grows far less than the depth (issue 13).
         rr_depth: bounces before Russian roulette starts.
         time_limit: seconds for the whole render (0 = none); the image rendered so far
             is returned when it runs out.
@@ -73,9 +76,10 @@ class RenderSettings:
             point: the ablation that shows the tree's role).
         lightcut_error: the lightcut stopping rule (:func:`~ercuts_core.integrators.ercuts.
             lightcuts.lightcut`): 'NODE' refines while some cut node's error bound exceeds
-            ``max_error`` of the estimate (Walter et al. 2005's practice); 'TOTAL' bounds the
-            *sum* of the nodes' bounds (the paper's eq. (5)); 'LITERAL' the paper's text
-            |L̄ − L| < ε·L per node (an ablation, not a bound).
+            ``max_error`` of the estimate (Walter et al. 2005's practice; an ablation);
+            'TOTAL' (default) bounds the *sum* of the nodes' bounds by ``max_error`` of the
+            estimate (the paper's eq. (5)); 'LITERAL' the paper's text |L̄ − L| < ε·L per
+            node (an ablation, not a bound).
         tree_pairing: how the light tree pairs clusters level by level: 'PLOC' (mutual-best
             rounds until half the clusters are paired) or 'GREEDY' (every mutual-best round
             to the end); an ablation (:mod:`~ercuts_core.integrators.ercuts.light_tree`).
@@ -89,6 +93,10 @@ class RenderSettings:
             (``direct_light='NEE'``).
         shading_samples: shading points (camera rays) per pixel for the VPL gather.
         e1_samples: shading points per VPL for its intensity normalisation (P*).
+        normalize_to_p: ablation: scale the VPL image so its energy equals the rough BDPT's
+            P (the behaviour before issue 13; it hid the VPL normalisation's bias). Off by
+            default: the VPL image keeps the energy its per-VPL normalisation gives, and
+            ``vpl_energy_ratio`` reports it against P.
         memory_budget_mb: memory the render may allocate, in MiB (0 = no limit); batch
             sizes are derived from it and a render whose estimate exceeds it even with the
             smallest batches is refused before allocating (:mod:`ercuts_core.memory`).
@@ -97,14 +105,14 @@ class RenderSettings:
     integrator: str = "ERCUTS"
     samples: int = 16
     seed: int = 0
-    max_depth: int = 8
+    max_depth: int = 64
     rr_depth: int = 3
     time_limit: float = 0.0
     film_transparent: bool = False
     batch_rays: int = 1 << 17
     threads: int = 0
     max_error: float = 0.02
-    iterations: int = 1
+    iterations: int = 0
     iteration_start: int = 0
     chains_per_pixel: float = 0.25
     chain_length: int = 100
@@ -115,13 +123,14 @@ class RenderSettings:
     max_cut_size: int = 1000
     clamp: float = 0.02
     gather: str = "LIGHTCUTS"
-    lightcut_error: str = "NODE"
+    lightcut_error: str = "TOTAL"
     tree_pairing: str = "PLOC"
     seeding: str = "BDPT"
     direct_light: str = "NEE"
     direct_samples: int = 64
     shading_samples: int = 1
     e1_samples: int = 256
+    normalize_to_p: bool = False
     memory_budget_mb: int = 4096
 
     def __post_init__(self):

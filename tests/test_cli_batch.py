@@ -33,7 +33,7 @@ W, H = 48, 36
 SMALL = ("import bpy, ercuts_core; print('ERCUTS_CORE', ercuts_core.__file__); "
          "s = bpy.context.scene; s.render.resolution_x, s.render.resolution_y = %d, %d; "
          "s.render.resolution_percentage = 100; s.ercuts.samples = 4; s.ercuts.chain_length = 20; "
-         "s.ercuts.time_limit = 60" % (W, H))
+         "s.ercuts.iterations = 1; s.ercuts.time_limit = 60" % (W, H))
 
 
 def run_blender(args, env, cwd, timeout=300) -> subprocess.CompletedProcess:

@@ -33,7 +33,9 @@ def ercuts_room(request):
 
 
 def test_energy_agrees_with_bdpt(ercuts_room):
-    """ERCUTS's image energy is within 3 % of BDPT's (paper: each path carries P/n)."""
+    """ERCUTS's image energy is within 3 % of BDPT's (paper: each path carries P/n). No
+    rescale to P hides the VPL normalisation any more (``normalize_to_p`` is off), so this
+    fails when it is wrong (test_injected_normalisation_error_shows_in_the_image)."""
     bdpt = [render(closed_room(48, 36), RenderSettings(integrator="BDPT", samples=16, seed=s)).image
             for s in range(3)]
     e_b = np.mean([luminance(b[..., :3]).mean() for b in bdpt])
@@ -180,20 +182,24 @@ def test_phase_deadlines_follow_the_shares():
     assert Schedule(SimpleNamespace(deadline=None), direct_vpls=False).deadline("bdpt") is None
 
 
-def test_vpl_image_energy_before_the_rescale(ercuts_room):
-    """The VPL image's own energy, before the rescale to P (``vpl_energy_ratio``), is P
-    within 5 % (measured 1.01 in this room with either direct-light mode;
-    benchmarks/results/e1_bias.md): the normalisation itself is tested, not hidden by the
-    rescale (the ERCUTS-vs-BDPT energy test above cannot fail while the rescale is on)."""
+def test_vpl_image_energy_matches_p(ercuts_room):
+    """The VPL image's own energy (``vpl_energy_ratio``) is P within 5 % (measured 1.01 in
+    this room with either direct-light mode; benchmarks/results/e1_bias.md)."""
     assert abs(ercuts_room.stats["vpl_energy_ratio"] - 1) < 0.05
 
 
 def test_vpl_energy_check_detects_a_wrong_normalisation(monkeypatch):
     """An injected error — every Ê1 15 % low, so every VPL 18 % too bright — fails the
-    check above (the rescale to P would hide it from the image energy)."""
+    check above, and it shows in the image: the indirect light is 18 % brighter, and the
+    ``normalize_to_p`` ablation would have hidden it."""
     from ercuts_core.integrators.ercuts import vpl
 
+    settings = RenderSettings(**FAST, seed=1)
+    good = render(closed_room(48, 36), settings)
     real = vpl.estimate_e1_allocated
     monkeypatch.setattr(vpl, "estimate_e1_allocated", lambda *a, **kw: 0.85 * real(*a, **kw))
-    res = render(closed_room(48, 36), RenderSettings(**FAST, seed=1))
+    res = render(closed_room(48, 36), settings)
     assert res.stats["vpl_energy_ratio"] > 1.1
+    assert luminance(res.image[..., :3]).mean() > 1.03 * luminance(good.image[..., :3]).mean()
+    hidden = render(closed_room(48, 36), settings.replace(normalize_to_p=True))
+    assert luminance(hidden.image[..., :3]).mean() < 1.03 * luminance(good.image[..., :3]).mean()

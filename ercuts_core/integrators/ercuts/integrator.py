@@ -380,18 +380,18 @@ class ErcutsIntegrator:
         return per_pixel_parts(L, S)
 
     def _energy_scale(self, gather: NDArray, vpls, P: float) -> float:
-        """The factor that makes the VPL image's energy P (paper §3.3: every path carries P/n).
+        """1, or with the ``normalize_to_p`` ablation the factor that makes the VPL image's
+        energy P (paper §3.3: every path carries P/n).
 
-        Each VPL is normalised by its own estimate Ê1 (vpl.py); the average of 1/Ê1 is
-        biased high (Jensen), a few per cent with 256 light-traced samples. The ratio
-        P / E(VPL image) removes that bias globally while the per-VPL Ê1 keep the relative
-        intensities. The raw ratio is reported as ``vpl_energy_ratio`` (1 = unbiased); an
-        incomplete gather is not rescaled (returns 1).
+        Each VPL is normalised by its own estimate Ê1 (vpl.py, two-stage: its Jensen bias
+        is small); the ratio E(VPL image) / P is reported as ``vpl_energy_ratio`` (1 =
+        unbiased) either way. The ablation rescales by P / E(VPL image), which hides any
+        error of the normalisation (issue 13); an incomplete gather is never rescaled.
         """
         stats = self.stats
         energy = float(luminance(gather + vpls.fallback).sum())
         stats["vpl_energy_ratio"] = energy / P if P > 0 else 0.0
-        if energy <= 0 or P <= 0 or stats.get("gather_incomplete"):
+        if not self.settings.normalize_to_p or energy <= 0 or P <= 0 or stats.get("gather_incomplete"):
             return 1.0
         return P / energy
 

@@ -31,7 +31,7 @@ PREVIEW = {
 #: Fallback for the Final preset when the core cannot be imported (its defaults).
 _FINAL_FALLBACK = {
     "samples": 16,
-    "max_depth": 8,
+    "max_depth": 64,
     "rr_depth": 3,
     "chains_per_pixel": 0.25,
     "chain_length": 100,

@@ -170,6 +170,12 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         description="Average number of energy-redistribution chains started per pixel",
         default=_default("chains_per_pixel", 0.25), min=0.0, soft_max=16.0,
     )
+    max_chains: IntProperty(
+        name="Max Chains",
+        description=("Energy-redistribution chains per iteration at most: large renders share "
+                     "this budget instead of starting chains at every pixel"),
+        default=_default("max_chains", 16384), min=1, soft_max=1 << 20,
+    )
     chain_length: IntProperty(
         name="Chain Length",
         description="Mutation steps per chain; every step deposits a share of the chain's energy",

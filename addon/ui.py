@@ -132,6 +132,7 @@ class ERCUTS_RENDER_PT_ercuts(ErcutsPanel, bpy.types.Panel):
         col.prop(settings, "max_cut_size")
         col = layout.column(align=True)
         col.prop(settings, "chains_per_pixel")
+        col.prop(settings, "max_chains")
         col.prop(settings, "chain_length")
         layout.prop(settings, "iterations")
         layout.prop(settings, "clamp")

@@ -145,9 +145,9 @@ def fixed_parts(n_pixels: int, n_triangles: int, settings: RenderSettings) -> di
 
 
 def _chains(n_pixels: int, s: RenderSettings) -> int:
-    """Expected chains Σ⌊U + e/(N·e_d)⌋ ≈ c·n·(seed energy / P) (measured 0.95–1.03 c·n),
-    with a margin of 1.25."""
-    return int(1.25 * s.chains_per_pixel * n_pixels)
+    """Expected chains Σ⌊U + e/(N·e_d)⌋ ≈ min(c·n, max_chains)·(seed energy / P) (measured
+    0.95–1.03), with a margin of 1.25: bounded by ``max_chains`` at any resolution."""
+    return int(1.25 * min(s.chains_per_pixel * n_pixels, s.max_chains))
 
 
 def phase_parts(n_pixels: int, settings: RenderSettings, batch: int, seeds: int, e1: int,

@@ -44,7 +44,9 @@ class RenderSettings:
         integrator: 'ERCUTS' (the paper: BDPT → ER chains → VPLs → light tree →
             lightcuts), 'BDPT' (bidirectional path tracing with MIS; also the "BDPT only"
             ablation) or 'PATH' (the reference path tracer with next-event estimation).
-        samples: samples per pixel (for ERCUTS: of the rough BDPT image of step 1).
+        samples: samples per pixel (for ERCUTS: of the rough BDPT image of step 1, which
+            only measures P and previews: at most 2^19 camera samples in all per iteration,
+            ``integrator.rough_samples``).
         seed: random seed; the same seed and settings give the same image.
         max_depth: maximum number of bounces (path segments − 1); 1 = direct light only.
             The default 64 keeps the light of deep interiors (8 lost up to 64 % of it in an
@@ -65,6 +67,9 @@ class RenderSettings:
             ``iteration_start`` … ``iteration_start + iterations − 1``), so that a frame's
             iterations can be split over several renders and averaged.
         chains_per_pixel: average number of ER chains started per pixel (c).
+        max_chains: ER chains per iteration at most (the default leaves renders up to
+            256×256 at c = 0.25 unchanged); beyond it the chains, VPLs and their memory
+            follow this budget instead of the pixel count, and iterations add more (issue 17).
         chain_length: mutation steps per chain (N); every step deposits P/n.
         lens_perturbation, caustic_perturbation, multichain_perturbation (inactive: it needs
         perfectly specular lobes, which the core does not have yet; hidden in the UI),
@@ -115,6 +120,7 @@ class RenderSettings:
     iterations: int = 0
     iteration_start: int = 0
     chains_per_pixel: float = 0.25
+    max_chains: int = 16384
     chain_length: int = 100
     lens_perturbation: bool = True
     caustic_perturbation: bool = True
@@ -160,8 +166,8 @@ class RenderSettings:
             raise ValueError(f"iteration_start must be >= 0, got {self.iteration_start}")
         if self.iterations < 0:
             raise ValueError(f"iterations must be >= 0 (0 = until the time limit), got {self.iterations}")
-        if self.chains_per_pixel <= 0 or self.chain_length < 1:
-            raise ValueError("chains_per_pixel must be > 0 and chain_length >= 1")
+        if self.chains_per_pixel <= 0 or self.chain_length < 1 or self.max_chains < 1:
+            raise ValueError("chains_per_pixel and max_chains must be > 0 and chain_length >= 1")
         if min(self.max_cut_size, self.shading_samples, self.e1_samples, self.direct_samples) < 1:
             raise ValueError("max_cut_size, shading_samples, e1_samples and direct_samples must be >= 1")
         if self.clamp < 0:

@@ -203,3 +203,30 @@ def test_vpl_energy_check_detects_a_wrong_normalisation(monkeypatch):
     assert luminance(res.image[..., :3]).mean() > 1.03 * luminance(good.image[..., :3]).mean()
     hidden = render(closed_room(48, 36), settings.replace(normalize_to_p=True))
     assert luminance(hidden.image[..., :3]).mean() < 1.03 * luminance(good.image[..., :3]).mean()
+
+
+def test_max_chains_caps_the_chains_and_keeps_the_energy():
+    """With ``max_chains`` below chains_per_pixel · pixels, seeds come from a random quarter
+    of the pixels (energies ×4) and about max_chains chains run (Σ⌊U + e/(N·e_d)⌋ has
+    expectation max_chains · seed energy / P, measured within 15 % of it here); the image
+    energy stays that of the uncapped render within the 3 % of the energy test above."""
+    room = closed_room(48, 36)
+    full = render(room, RenderSettings(**FAST, seed=2))
+    cap = int(FAST["chains_per_pixel"] * 48 * 36 / 4)
+    capped = render(room, RenderSettings(**FAST, seed=2, max_chains=cap))
+    assert capped.stats["seed_pixels"] == 48 * 36 // 4
+    assert full.stats["seed_pixels"] == 48 * 36
+    assert abs(capped.stats["chains"] / cap - 1) < 0.15, capped.stats["chains"]
+    e_full, e_cap = (luminance(r.image[..., :3]).mean() for r in (full, capped))
+    assert abs(e_cap / e_full - 1) < 0.03, (e_cap, e_full)
+
+
+def test_rough_pass_samples_follow_a_budget_not_the_pixels():
+    """Step 1 only measures P (and previews): 16 spp at 160×120, fewer per pixel above
+    2^19 camera samples — 2 at 640×480, 1 at 1920×1080 — never 0."""
+    from ercuts_core.integrators.ercuts.integrator import rough_samples
+
+    assert rough_samples(160 * 120, 16) == 16
+    assert rough_samples(640 * 480, 16) == 2
+    assert rough_samples(1920 * 1080, 16) == 1
+    assert rough_samples(10, 4) == 4

@@ -12,7 +12,7 @@ from ercuts_core.memory import MIB, MemoryBudgetError, plan, plan_for
 
 
 @pytest.mark.parametrize("integrator,n,phase", [("PATH", 1920 * 1080, "batch"), ("BDPT", 1920 * 1080, "batch"),
-                                                ("ERCUTS", 640 * 480, "lightcuts")])
+                                                ("ERCUTS", 640 * 480, "seed batch")])
 def test_batches_shrink_to_fit_the_budget(integrator, n, phase):
     roomy = plan(n, 10_000, RenderSettings(integrator=integrator, memory_budget_mb=0))
     assert max(roomy.phases, key=roomy.phases.get) == phase

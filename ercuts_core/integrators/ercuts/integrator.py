@@ -96,6 +96,15 @@ from .vpl import GBuffer, build_gbuffer, g_clamp, make_vpls
 
 #: Conservative throughput of the E1 estimate (light-traced samples per second, 2 cores).
 _E1_RATE = 1.0e6
+#: Camera samples of the rough BDPT pass per iteration at most (step 1 measures P and shows a
+#: first image; the final image does not use it): ``samples`` per pixel up to 2^19 in all
+#: (so 160×120 keeps its 16), fewer per pixel at larger resolutions (issue 17).
+ROUGH_SAMPLE_BUDGET = 1 << 19
+
+
+def rough_samples(n_pixels: int, samples: int) -> int:
+    """Rough BDPT samples per pixel: ``samples``, at most ⌈ROUGH_SAMPLE_BUDGET / n_pixels⌉ (≥ 1)."""
+    return int(max(1, min(samples, -(-ROUGH_SAMPLE_BUDGET // max(n_pixels, 1)))))
 #: Largest E1 chunk (samples) for progress reports every ~0.25 s of work.
 PROGRESS_E1_CHUNK = 1 << 16
 
@@ -223,9 +232,10 @@ class ErcutsIntegrator:
 
     # ------------------------------------------------------------------ phase 1
     def _rough_bdpt(self) -> Film:
-        """``samples`` BDPT passes (fewer if the phase's time share runs out)."""
+        """:func:`rough_samples` BDPT passes (fewer if the phase's time share runs out)."""
+        n = self.scene.camera.window.n_pixels
         return self._passes(BDPTIntegrator(self.scene, self.settings), "BDPT", (), "bdpt",
-                            show=True, samples=self.settings.samples)
+                            show=True, samples=rough_samples(n, self.settings.samples))
 
     def _direct_light(self) -> tuple[NDArray, NDArray]:
         """``direct_samples`` jittered passes of the light that reaches the camera directly or after
@@ -255,29 +265,41 @@ class ErcutsIntegrator:
         return seeds_from_path_tracer(scene, s.max_depth, rng, pix, direct=s.direct_vpls)
 
     def _chain_seeds(self, P: float, rng) -> tuple[PathBatch, NDArray]:
-        """Seed paths (fresh paths, one sample per pixel) and their chain counts for chains
-        whose states are worth e_d = P/n, n = chains_per_pixel · chain_length · pixels; in
-        batches of ``memory.seed_pixels`` pixels (at most
-        :func:`~ercuts_core.integrators.base.progress_batch_pixels`, reporting progress after
-        each); only seeds that start a chain are kept, so the seed memory is that of one batch."""
+        """Seed paths (fresh paths, one sample per seed pixel) and their chain counts for
+        chains whose states are worth e_d = P/n, n = C · chain_length with
+        C = min(chains_per_pixel · pixels, max_chains) chains per iteration: the chains, and so
+        the VPLs, follow a budget, not the pixel count (issue 17). When the cap binds, seeds
+        come from a random fraction q = C / (chains_per_pixel · pixels) of the pixels, their
+        energies divided by q (an unbiased estimate of the image energy: every pixel is in
+        the subset with probability q). Traced in batches of ``memory.seed_pixels`` pixels
+        (at most :func:`~ercuts_core.integrators.base.progress_batch_pixels`, reporting
+        progress after each); only seeds that start a chain are kept, so the seed memory is
+        that of one batch."""
         s, n = self.settings, self.scene.camera.window.n_pixels
-        n_target = s.chains_per_pixel * s.chain_length * n
-        e_d = P / n_target if n_target > 0 else 0.0
+        wanted = s.chains_per_pixel * n
+        n_chains = min(wanted, s.max_chains)
+        e_d = P / (n_chains * s.chain_length) if n_chains > 0 else 0.0
+        pix, q = np.arange(n), 1.0
+        if n_chains < wanted:
+            q = n_chains / wanted
+            pix = np.sort(rng.permutation(n)[:max(1, int(round(q * n)))])
+            q = len(pix) / n
+        self.stats["seed_pixels"] = len(pix)
         step = min(self.memory.seed_pixels, progress_batch_pixels(s))
-        if step >= n:
-            seeds, energy = self._seeds(rng)
-            starts = chain_starts(energy, s.chain_length, e_d, rng)
+        if step >= len(pix):
+            seeds, energy = self._seeds(rng, None if q == 1.0 else pix)
+            starts = chain_starts(energy / q, s.chain_length, e_d, rng)
             self.schedule.report("ER chains", 0.1, "ER chains: seed paths 100%")
             self.stats["seed_paths"] = len(seeds)
             return seeds.take(starts > 0), starts[starts > 0]
         kept, counts, total = [], [], 0
-        for start in range(0, n, step):
-            seeds, energy = self._seeds(rng, np.arange(start, min(n, start + step)))
-            starts = chain_starts(energy, s.chain_length, e_d, rng)
+        for start in range(0, len(pix), step):
+            seeds, energy = self._seeds(rng, pix[start:start + step])
+            starts = chain_starts(energy / q, s.chain_length, e_d, rng)
             kept.append(seeds.take(np.flatnonzero(starts > 0)))
             counts.append(starts[starts > 0])
             total += len(seeds)
-            f = min(n, start + step) / n
+            f = min(len(pix), start + step) / len(pix)
             if not self.schedule.report("ER chains", 0.1 * f, f"ER chains: seed paths {100 * f:.0f}%"):
                 break
         self.stats["seed_paths"] = total

@@ -276,6 +276,22 @@ def test_capped_cut_spends_budget_on_largest_errors() -> None:
     assert rel.mean() < 0.05 and rel.max() < 0.3, (rel.mean(), rel.max())   # 0.13, 0.80 if not
 
 
+def test_unmet_flags_exactly_the_points_whose_bound_was_not_reached() -> None:
+    """With a binding cap, total mode flags the points whose cut hit the cap before Σ L̄_C
+    fell under ε: every unflagged point is within ε of the exact sum (the guarantee), and
+    only capped cuts are flagged; with room to refine nothing is flagged."""
+    lights, pts = room_scene(4000, 200, 5)
+    tree = build_light_tree(*lights, seed=3)
+    exact = luminance(brute_force(*lights, pts))
+    capped = lightcut(tree, *lights, pts, max_cut_size=60, error_mode="total")
+    rel = np.abs(luminance(capped.radiance) - exact) / exact
+    assert capped.unmet.any() and np.all(capped.cut_size[capped.unmet] == 60)
+    assert np.all(rel[~capped.unmet] <= 0.02 + 1e-12)
+    assert rel[capped.unmet].max() > 0.02            # the flag is not decoration
+    free = lightcut(tree, *lights, pts, max_cut_size=4000, error_mode="total")
+    assert not free.unmet.any()
+
+
 def test_literal_mode_is_cheaper_and_modes_are_checked() -> None:
     lights = random_vpls(1000, 11)
     pts = diffuse_points(150, 11)

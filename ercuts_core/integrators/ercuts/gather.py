@@ -103,6 +103,7 @@ class Gather:
         share = emitter_share(tree, vpls) if tree is not None else None
         rays = 0
         clamped = 0.0
+        unmet = 0
         done = 0
         pace = GatherPace(s.max_error, s.max_cut_size)
 
@@ -128,6 +129,7 @@ class Gather:
                 L[0, idx], L[1, idx], cut[idx] = em, res.radiance - em, res.cut_size
                 rays += res.shadow_rays
                 clamped += res.clamped_energy
+                unmet += int(res.unmet.sum())
             else:
                 for part, sel in enumerate((vpls.emitter, ~vpls.emitter)):
                     if sel.any():
@@ -148,6 +150,8 @@ class Gather:
         valid_cut = cut[pts_all[:done]] if done else np.zeros(1)
         stats["cut_size_mean"] = float(valid_cut.mean()) if done else 0.0
         stats["cut_size_max"] = int(valid_cut.max()) if done else 0
+        # Points whose cut hit the size cap (or the pacing) before the error rule held.
+        stats["cut_bound_unmet"] = unmet / done if done else 0.0
         stats["gather_shadow_rays"] = rays
         stats["clamped_energy"] = clamped / S
         glossy = self._glossy()

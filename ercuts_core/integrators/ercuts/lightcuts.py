@@ -169,6 +169,9 @@ class LightcutResult:
             ``return_cut=True`` (else None); C = cut_size.sum().
         cut_estimate: (C,3) RGB estimate M_r·G_r·V_r·I_C of each entry (or None).
         cut_bound: (C,) luminance error bound L̄_C of each entry (or None).
+        unmet: (P,) bool, the point's cut stopped (``max_cut_size`` or ``on_round``) before
+            its stopping rule held: its error is *not* bounded by ``max_error`` (reported as
+            ``cut_bound_unmet`` so a "2 %" that was not reached says so).
     """
 
     radiance: NDArray
@@ -180,6 +183,7 @@ class LightcutResult:
     cut_node: NDArray | None = None
     cut_estimate: NDArray | None = None
     cut_bound: NDArray | None = None
+    unmet: NDArray | None = None
 
 
 # ------------------------------------------------------------------------------ bounds
@@ -557,10 +561,13 @@ def lightcut(tree: LightTree, vpl_pos: NDArray, vpl_normal: NDArray, vpl_intensi
     e = _Entries(pidx, root, unit, loss, cluster_bound(tree, root, pts, pidx, clamp))
     e = _retire(tree, e, acc)
     rounds = 0
+    unmet = np.zeros(n_pts, bool)
     while e.pt.size:
         est = luminance(e.unit * take_rows(tree.intensity, e.node))
         total = luminance(acc.rad) + np.bincount(e.pt, est, n_pts)
         err, thr = _criterion(e, est, total, error_mode, max_error, abs_floor)
+        unmet[:] = False
+        unmet[e.pt[err > thr]] = True         # refinement wanted: the rule does not hold yet
         budget = max_cut_size - acc.count - np.bincount(e.pt, minlength=n_pts)
         sel = _select(e, err, thr, budget, _BAND)
         if sel.size == 0:
@@ -573,8 +580,12 @@ def lightcut(tree: LightTree, vpl_pos: NDArray, vpl_normal: NDArray, vpl_intensi
         rounds += 1
         if on_round is not None and on_round() is False:
             break
+    else:
+        unmet[:] = False                      # every entry retired exact
     acc.add(tree, e)
-    return _result(tree, acc, rays, rounds)
+    res = _result(tree, acc, rays, rounds)
+    res.unmet = unmet
+    return res
 
 
 def _result(tree: LightTree, acc: _Accum, rays: int, rounds: int) -> LightcutResult:

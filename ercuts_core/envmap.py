@@ -134,7 +134,11 @@ class EnvMap:
         """(N, 3) float64 radiance arriving from world directions ``d_world`` (N, 3) (toward the
         environment), bilinear with periodic wrap (Cycles Linear + Repeat)."""
         d = np.asarray(d_world, np.float64).reshape(-1, 3)
-        u, v = direction_to_uv(self.to_map(d))
+        return self.lookup_uv(*direction_to_uv(self.to_map(d)))
+
+    def lookup_uv(self, u: NDArray, v: NDArray) -> NDArray:
+        """(N, 3) bilinear radiance at equirectangular coordinates (N,) ``u``, ``v`` (wrapping)."""
+        u, v = np.asarray(u, np.float64).reshape(-1), np.asarray(v, np.float64).reshape(-1)
         x = u * self.W - 0.5
         y = v * self.H - 0.5
         x0, y0 = np.floor(x), np.floor(y)

@@ -97,6 +97,11 @@ def _environment(tex, strength, reader: _Reader, fallback):
         return np.array(MISSING_TEXTURE_RGB, np.float32) * strength, None
     rotation = _vector_rotation(tex.inputs.get("Vector"), reader)
     radiance = pixels * strength
+    if isinstance(rotation, tuple):              # a constant vector: one texel everywhere
+        from ercuts_core.envmap import EnvMap, direction_to_uv
+        d = np.asarray(rotation[1], np.float64).reshape(1, 3)
+        u, v = direction_to_uv(d) if np.any(d != 0) else (np.zeros(1), np.zeros(1))
+        return EnvMap(radiance).lookup_uv(u, v)[0].astype(np.float32), None
     H = radiance.shape[0]
     sin_row = np.sin(np.pi * (np.arange(H) + 0.5) / H)          # solid-angle weight of a row
     mean = (radiance.mean(axis=1) * sin_row[:, None]).sum(0) / sin_row.sum()
@@ -137,13 +142,21 @@ def _euler_xyz(rx: float, ry: float, rz: float) -> np.ndarray:
     return Rz @ Ry @ Rx
 
 
-def _vector_rotation(socket, reader: _Reader) -> np.ndarray:
-    """(3, 3) world → map rotation of the Environment Texture's Vector input."""
+def _vector_rotation(socket, reader: _Reader):
+    """(3, 3) world → map rotation of the Environment Texture's Vector input, or
+    ("constant", vector) when the lookup vector does not depend on the direction."""
     node, out = follow_link(socket)
     rotation = np.eye(3)
     if node is not None and node.bl_idname == "ShaderNodeMapping":
-        rotation = _mapping_rotation(node, reader)
-        node, out = follow_link(node.inputs.get("Vector"))
+        mapping = node
+        rotation = _mapping_rotation(mapping, reader)
+        node, out = follow_link(mapping.inputs.get("Vector"))
+        if node is None:
+            # Cycles: an unlinked Mapping input is the constant (0, 0, 0), not the direction
+            reader.note(f"Mapping '{mapping.name}' has no input vector: one texel lights the "
+                        "whole world, as in Cycles")
+            loc = reader.value(mapping.inputs.get("Location"), (0.0, 0.0, 0.0))
+            return ("constant", loc[:3] if mapping.vector_type == "POINT" else (0.0, 0.0, 0.0))
     if node is None:
         return rotation
     if node.bl_idname == "ShaderNodeTexCoord" and out.name in ("Generated", "Object"):

@@ -97,7 +97,20 @@ def test_byte_srgb_image_is_linearised_and_non_color_is_not():
     np.testing.assert_allclose(_map(h.export()).radiance, 128 / 255, atol=1e-6)
 
 
-@pytest.mark.parametrize("coords", [None, "Generated", "Object"])
+def test_mapping_without_input_is_one_texel_like_cycles():
+    """Cycles feeds an unlinked Mapping input (0, 0, 0): the texel lookup at (u, v) = (0, 0),
+    the mean of the four corner texels (bilinear, wrapping)."""
+    px = hot_spot_pixels()
+    px[0, 0, :3], px[-1, -1, :3] = (1.0, 2.0, 3.0), (3.0, 2.0, 1.0)
+    hdri_world(px, rotation_deg=(0, 0, 90))
+    h.camera()
+    ex = h.export()
+    assert ex.description.world_map is None and len(ex.warnings) == 1
+    want = (px[0, 0, :3] + px[0, -1, :3] + px[-1, 0, :3] + px[-1, -1, :3]) / 4
+    np.testing.assert_allclose(ex.description.world_radiance, want, rtol=1e-6)
+
+
+@pytest.mark.parametrize("coords", ["Generated", "Object"])
 def test_mapping_rotation_is_world_to_map(coords):
     hdri_world(hot_spot_pixels(), rotation_deg=(0, 0, 90), coords=coords)
     h.camera()
@@ -110,7 +123,7 @@ def test_mapping_rotation_is_world_to_map(coords):
 
 
 def test_euler_order_is_blenders():
-    hdri_world(hot_spot_pixels(), rotation_deg=(30, 40, 50))
+    hdri_world(hot_spot_pixels(), rotation_deg=(30, 40, 50), coords="Generated")
     h.camera()
     from mathutils import Euler
     want = np.array(Euler([math.radians(a) for a in (30, 40, 50)], "XYZ").to_matrix())
@@ -147,7 +160,8 @@ def test_hdri_lit_object_agrees_with_cycles(tmp_path, rotation):
     rotation of 120° about Z the light comes from the other side): BDPT vs Cycles, image
     means within 3 % and 8×8 block means within the noise (two seeds each)."""
     base_scene()
-    hdri_world(hot_spot_pixels(), strength=1.0, rotation_deg=rotation)
+    hdri_world(hot_spot_pixels(), strength=1.0, rotation_deg=rotation,
+               coords="Generated" if rotation is not None else None)
     runs = [render_both(tmp_path, max_depth=4, samples=64, cycles_samples=512, seed=seed,
                         tag=f"hdri{rotation is not None}") for seed in (1, 2)]
     e_pair, c_pair = [r[0] for r in runs], [r[1] for r in runs]

@@ -113,7 +113,7 @@ def test_sample_pdf_agree_and_pdf_integrates_to_one(rotation):
     dm = uv_to_direction(u.ravel(), v.ravel())
     sin_t = np.cos(np.pi * (v.ravel() - 0.5))
     total = (m.pdf(m.to_world(dm)) * 2 * np.pi**2 * sin_t).sum() / (n_u * n_v)
-    assert abs(total - 1.0) < 1e-9
+    assert abs(total - 1.0) < 1e-6                     # exact but for the float32 cell table
     # The pdf is positive wherever the looked-up radiance is (no zero-pdf light)
     L = m.lookup(m.to_world(dm))
     assert (m.pdf(m.to_world(dm))[luminance(L) > 0] > 0).all()

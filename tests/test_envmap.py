@@ -126,8 +126,8 @@ def test_sampling_chi_square():
     d, _ = m.sample(RNG.random((n, 2)))
     u, v = direction_to_uv(m.to_map(d))
     bu, bv = 16, 8
-    obs = np.bincount(np.minimum((v * bv).astype(int), bv - 1) * bu + np.minimum((u * bu).astype(int), bu - 1),
-                      minlength=bu * bv)
+    cell = np.minimum((v * bv).astype(int), bv - 1) * bu + np.minimum((u * bu).astype(int), bu - 1)
+    obs = np.bincount(cell, minlength=bu * bv)
     k = 16                                               # midpoint points per bin side
     uu, vv = np.meshgrid((np.arange(bu * k) + 0.5) / (bu * k), (np.arange(bv * k) + 0.5) / (bv * k))
     dm = uv_to_direction(uu.ravel(), vv.ravel())

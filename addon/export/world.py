@@ -77,7 +77,8 @@ def world_background(world):
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     """sRGB-encoded values in [0, 1] → linear (IEC 61966-2-1 piecewise transfer function)."""
     c = np.asarray(c, np.float32)
-    return np.where(c <= 0.04045, c / 12.92, ((np.maximum(c, 0.04045) + 0.055) / 1.055) ** 2.4).astype(np.float32)
+    curve = ((np.maximum(c, 0.04045) + 0.055) / 1.055) ** 2.4
+    return np.where(c <= 0.04045, c / 12.92, curve).astype(np.float32)
 
 
 def _environment(tex, strength, reader: _Reader, fallback):
@@ -176,8 +177,10 @@ def _mapping_rotation(node, reader: _Reader) -> np.ndarray:
     rot = reader.value(node.inputs.get("Rotation"), (0.0, 0.0, 0.0))
     R = _euler_xyz(*(float(a) for a in rot[:3]))
     kind = getattr(node, "vector_type", "POINT")
-    loc = reader.value(node.inputs.get("Location"), (0.0, 0.0, 0.0)) if kind in ("POINT", "TEXTURE") else (0, 0, 0)
+    loc = (reader.value(node.inputs.get("Location"), (0.0, 0.0, 0.0)) if kind in ("POINT", "TEXTURE")
+           else (0.0, 0.0, 0.0))
     scale = reader.value(node.inputs.get("Scale"), (1.0, 1.0, 1.0))
-    if np.any(np.abs(np.asarray(loc[:3], float)) > 1e-6) or np.any(np.abs(np.asarray(scale[:3], float) - 1) > 1e-6):
+    moved = np.any(np.abs(np.asarray(loc[:3], float)) > 1e-6)
+    if moved or np.any(np.abs(np.asarray(scale[:3], float) - 1) > 1e-6):
         reader.note(f"Mapping '{node.name}': location and scale of the environment direction are ignored")
     return R.T if kind == "TEXTURE" else R

@@ -163,9 +163,11 @@ def _vector_rotation(socket, reader: _Reader):
     if node.bl_idname == "ShaderNodeTexCoord" and out.name in ("Generated", "Object"):
         obj = getattr(node, "object", None)
         if out.name == "Object" and obj is not None:
-            m = np.array(obj.matrix_world, np.float64)[:3, :3]
-            u, _, vt = np.linalg.svd(m)                      # the object's rotation, scale removed
+            m = np.array(obj.matrix_world, np.float64)
+            u, _, vt = np.linalg.svd(m[:3, :3])              # the object's rotation, scale removed
             rotation = rotation @ (u @ vt).T
+            if np.any(np.abs(m[:3, 3]) > 1e-6):
+                reader.note(f"environment coordinates of object '{obj.name}': its location is ignored")
         return rotation
     reader.note(f"environment vector from unsupported node '{node.name}' ({node.bl_idname}), "
                 "using the view direction")

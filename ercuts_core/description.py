@@ -316,8 +316,7 @@ class SceneDescription:
     """A complete scene: geometry, materials, lights, camera, world.
 
     ``camera`` may be None only so that validation can report "no camera" as an error.
-    ``world_radiance`` is the constant background radiance (3,) [W·sr⁻¹·m⁻²];
-    ``world_map``, when set, replaces it as the background (an HDRI, :class:`WorldMap`).
+    ``world_radiance`` is the constant background radiance (3,) [W·sr⁻¹·m⁻²].
     """
 
     mesh: MeshTable
@@ -327,7 +326,7 @@ class SceneDescription:
     sun_lights: SunLights = field(default_factory=_empty_suns)
     area_lights: AreaLights = field(default_factory=_empty_areas)
     world_radiance: F32 = field(default_factory=lambda: np.zeros(3, np.float32))
-    world_map: WorldMap | None = None
+    world_map: WorldMap | None = None        # an HDRI; when set it replaces world_radiance
     object_names: tuple[str, ...] = ()
     schema_version: int = SCHEMA_VERSION
 

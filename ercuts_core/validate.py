@@ -251,11 +251,12 @@ def sanitize(desc: SceneDescription) -> Validated:
     mesh = _clean_mesh(desc, issues, stats)
     mats = _clean_materials(desc.materials, issues)
     pl, sl, al = _clean_lights(desc, issues, stats)
+    desc = desc.replace(world_map=_clean_world_map(desc, issues))
     world = np.clip(np.nan_to_num(desc.world_radiance, nan=0.0, posinf=0.0), 0, None)
     if not np.isfinite(desc.world_radiance).all():
         issues.append(Issue("warning", "nonfinite_world", "World: NaN/Inf background colour, rendered black"))
     clean = desc.replace(mesh=mesh, materials=mats, point_lights=pl, sun_lights=sl, area_lights=al,
-                         world_radiance=world, world_map=_clean_world_map(desc, issues))
+                         world_radiance=world)
     if not has_emitters(clean):
         issues.append(Issue("warning", "no_lights",
                             "Scene has no lights (or all lights have zero power): the image is black"))

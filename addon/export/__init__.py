@@ -200,8 +200,10 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
     desc = SceneDescription(
         mesh=mesh_table, materials=material_table, camera=camera,
         point_lights=points, sun_lights=suns, area_lights=areas,
-        world_radiance=radiance, world_map=world_map, object_names=tuple(names),
+        world_radiance=radiance, object_names=tuple(names),
     )
+    if world_map is not None:                            # an HDRI replaces world_radiance
+        desc = desc.replace(world_map=world_map)
     return ExportResult(
         description=desc, warnings=warnings, has_emitters=has_emitters,
         seconds=time.monotonic() - t0,

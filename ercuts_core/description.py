@@ -289,6 +289,29 @@ class CameraDesc:
 
 
 @dataclass(frozen=True)
+class WorldMap:
+    """An equirectangular environment texture (Blender's World → Environment Texture).
+
+    Lookup, orientation and sampling follow Cycles: see :mod:`ercuts_core.envmap`.
+
+    Attributes:
+        radiance: (H, W, 3) float32 linear RGB radiance [W·sr⁻¹·m⁻²]: the image (linear,
+            colour space already converted) × the Background strength. Row 0 is the *bottom*
+            row (v = ½/H, toward −Z), as Blender stores ``Image.pixels``; column 0 is u = ½/W.
+        rotation: (3, 3) float32 world → map-space rotation (d_map = rotation · d_world), from a
+            Mapping node; identity by default.
+    """
+
+    radiance: F32
+    rotation: F32 = field(default_factory=lambda: np.eye(3, dtype=np.float32))
+
+    def __post_init__(self):
+        # The shape is checked by validate.sanitize (a wrong one falls back to world_radiance).
+        object.__setattr__(self, "radiance", np.ascontiguousarray(np.asarray(self.radiance, np.float32)))
+        object.__setattr__(self, "rotation", _f32(self.rotation, ()).reshape(3, 3))
+
+
+@dataclass(frozen=True)
 class SceneDescription:
     """A complete scene: geometry, materials, lights, camera, world.
 
@@ -303,6 +326,7 @@ class SceneDescription:
     sun_lights: SunLights = field(default_factory=_empty_suns)
     area_lights: AreaLights = field(default_factory=_empty_areas)
     world_radiance: F32 = field(default_factory=lambda: np.zeros(3, np.float32))
+    world_map: WorldMap | None = None        # an HDRI; when set it replaces world_radiance
     object_names: tuple[str, ...] = ()
     schema_version: int = SCHEMA_VERSION
 
@@ -329,6 +353,7 @@ _PARTS = {
     "sun_lights": SunLights,
     "area_lights": AreaLights,
     "camera": CameraDesc,
+    "world_map": WorldMap,
 }
 
 
@@ -396,6 +421,7 @@ def load_npz(path: str | os.PathLike) -> SceneDescription:
             sun_lights=parts.get("sun_lights", _empty_suns()),
             area_lights=parts.get("area_lights", _empty_areas()),
             world_radiance=z["world_radiance"],
+            world_map=parts.get("world_map"),
             object_names=tuple(str(s) for s in names.reshape(-1)),
             schema_version=int(z["schema_version"]),
         )

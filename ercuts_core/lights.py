@@ -9,8 +9,16 @@ POINT   point and spot     intensity I(ω) = I·spot(ω) [W/sr]           no (de
 SUN     directional        irradiance E [W/m²] along ``direction``     no (delta direction)
 AREA    rect/ellipse       radiance L [W·sr⁻¹·m⁻²], one-sided           no (next-event only)
 TRI     emissive triangle  radiance L, two-sided (Blender's Emission)   yes
-ENV     world background   constant radiance L                          yes (escaped rays)
+ENV     world background   radiance L(ω): constant, or an HDRI map      yes (escaped rays)
 ======  =================  ===========================================  =============
+
+The environment is either the constant ``world_radiance`` (directions sampled uniformly on
+the sphere, density 1/(4π)) or an equirectangular map (``SceneDescription.world_map``,
+:class:`~ercuts_core.envmap.EnvMap`: bilinear lookup, directions importance-sampled ∝
+luminance·sinθ). Every ENV quantity is a function of the direction ω *toward* the
+environment: :meth:`LightSet.env_radiance`, :meth:`LightSet.env_pdf_dir`,
+:meth:`LightSet.pdf_illuminate_env`; its selection power is πR²·∫Y(L(ω))dω (pbrt-v3
+InfiniteAreaLight::Power).
 
 Spot falloff follows Cycles ≥ 4.0: smoothstep((cosθ − cos½)/((1 − cos½)·blend)), a hard
 edge when blend = 0 (``blender/cycles src/kernel/light/spot.h``).
@@ -34,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .description import SHAPE_ELLIPSE, SceneDescription
+from .envmap import EnvMap
 from .sampling import (
     Distribution1D,
     coordinate_system,
@@ -153,8 +162,12 @@ class LightSet:
         self.tri_n = tri_ng[self.emissive_tris]
         self.tri_area = tri_area[self.emissive_tris]
         self.tri_L = em[self.emissive_tris]
-        self.env_L = desc.world_radiance.astype(np.float64)
-        has_env = luminance(self.env_L) > 0
+        wm = desc.world_map
+        #: The HDRI (None: the constant ``env_L``); env_L is then the map's mean colour.
+        self.env_map = EnvMap(wm.radiance, wm.rotation) if wm is not None else None
+        self.env_L = desc.world_radiance.astype(np.float64) if self.env_map is None \
+            else self.env_map.mean_rgb
+        has_env = self.env_light_exists()
         # Global light table: kind and index within its kind.
         kinds = [np.full(len(self.pt_pos), POINT), np.full(len(self.sun_dir), SUN),
                  np.full(len(self.ar_c), AREA), np.full(len(self.tri_p), TRI),
@@ -186,10 +199,18 @@ class LightSet:
             r2 * luminance(self.sun_E),
             np.pi * self.ar_area * luminance(self.ar_L),
             2 * np.pi * self.tri_area * luminance(self.tri_L),
-            [r2 * 4 * np.pi * luminance(self.env_L)] if self.env_light_exists() else [],
+            [r2 * self._env_integral()] if self.env_light_exists() else [],
         ])
 
+    def _env_integral(self) -> float:
+        """∫ Y(L(ω)) dω over the sphere [W·m⁻²]."""
+        if self.env_map is not None:
+            return self.env_map.integral_Y
+        return 4 * np.pi * luminance(self.env_L)
+
     def env_light_exists(self) -> bool:
+        if self.env_map is not None:
+            return self.env_map.total > 0
         return bool(luminance(self.env_L) > 0)
 
     @property
@@ -267,12 +288,11 @@ class LightSet:
                 pdf_area[m] = 1.0 / area[i]
         m = kind == ENV
         if m.any():
-            w = sample_uniform_sphere(u[m])
+            w, pdf_dir[m] = self.env_sample(u[m])
             p[m] = x[m] + w * r2
             nl[m] = -w
-            Li[m] = self.env_L
+            Li[m] = self.env_radiance(w)
             pdf_area[m] = 1.0 / (np.pi * self.radius**2)
-            pdf_dir[m] = _INV_4PI
         wi, dist = normalize(p - x)
         infinite = (kind == SUN) | (kind == ENV)
         dist = np.where(infinite, np.inf, dist)
@@ -286,7 +306,7 @@ class LightSet:
                            * np.where(kind == TRI, 0.5, 1.0), pdf_dir)
         pdf_w = np.where(surf, pdf_area * np.where(np.isfinite(dist), dist, 0) ** 2 /
                          np.maximum(np.abs(cos_l), 1e-300), 1.0)
-        pdf_w = np.where(kind == ENV, _INV_4PI, pdf_w) * sel
+        pdf_w = np.where(kind == ENV, pdf_dir, pdf_w) * sel
         pdf_w = np.where(is_delta, sel, pdf_w)
         valid = (sel > 0) & (luminance(Li) > 0) & np.isfinite(pdf_w) & (pdf_w > 0)
         return LightSample(Li, wi, dist, pdf_w, is_delta, light, p, nl, pdf_area * sel, pdf_dir, valid)
@@ -313,15 +333,32 @@ class LightSet:
             out[m] = self.pmf(light[m]) / area * d**2 / np.maximum(cos_l, 1e-300)
         return out
 
-    def env_radiance(self, n: int) -> NDArray:
-        """(n, 3) radiance of escaped rays."""
-        return np.broadcast_to(self.env_L, (n, 3)).copy()
+    def env_radiance(self, w: NDArray) -> NDArray:
+        """(N, 3) radiance arriving from unit directions ``w`` (N, 3) toward the environment
+        (the radiance of escaped rays along ``w``)."""
+        if self.env_map is not None:
+            return self.env_map.lookup(w)
+        return np.broadcast_to(self.env_L, (len(w), 3)).copy()
 
-    def pdf_illuminate_env(self, n: int) -> NDArray:
-        """(n,) solid-angle density of :meth:`illuminate` choosing a given environment direction."""
+    def env_sample(self, u: NDArray) -> tuple[NDArray, NDArray]:
+        """(N, 3) unit directions toward the environment from (N, 2) uniforms, and their (N,)
+        solid-angle density without the selection pmf (uniform sphere for a constant world)."""
+        if self.env_map is not None:
+            return self.env_map.sample(u)
+        return sample_uniform_sphere(u), np.full(len(u), _INV_4PI)
+
+    def env_pdf_dir(self, w: NDArray) -> NDArray:
+        """(N,) solid-angle density of :meth:`env_sample` producing directions ``w`` (N, 3)."""
+        if self.env_map is not None:
+            return self.env_map.pdf(w)
+        return np.full(len(w), _INV_4PI)
+
+    def pdf_illuminate_env(self, w: NDArray) -> NDArray:
+        """(N,) solid-angle density of :meth:`illuminate` choosing environment directions
+        ``w`` (N, 3) (selection pmf included; 0 without an environment light)."""
         if self.env_light < 0:
-            return np.zeros(n)
-        return np.full(n, self.pmf(np.array([self.env_light]))[0] * _INV_4PI)
+            return np.zeros(len(w))
+        return self.pmf(np.array([self.env_light]))[0] * self.env_pdf_dir(w)
 
     # ------------------------------------------------------------ emission (light subpaths)
     def emit(self, u_sel: NDArray, u_pos: NDArray, u_dir: NDArray) -> Emission:
@@ -355,9 +392,9 @@ class LightSet:
                 dm = self.sun_dir[loc[m]]
                 Le[m] = self.sun_E[loc[m]]
             else:
-                dm = -sample_uniform_sphere(u_dir[m])
-                Le[m] = self.env_L
-                pdf_dir[m] = _INV_4PI
+                w, pdf_dir[m] = self.env_sample(u_dir[m])
+                dm = -w
+                Le[m] = self.env_radiance(w)
             t, b = coordinate_system(dm)
             disk = sample_uniform_disk_concentric(u_pos[m]) * self.radius
             p[m] = self.center - dm * self.radius + disk[:, :1] * t + disk[:, 1:] * b
@@ -426,7 +463,9 @@ class LightSet:
         m = (kind == SUN) | (kind == ENV)
         pdf_pos[m] = 1.0 / (np.pi * self.radius**2)
         pdf_dir[kind == SUN] = 0.0
-        pdf_dir[kind == ENV] = _INV_4PI
+        m = kind == ENV
+        if m.any():
+            pdf_dir[m] = self.env_pdf_dir(-d[m])       # d: direction of travel, −d toward the map
         m = kind == AREA
         if m.any():
             pdf_pos[m] = 1.0 / self.ar_area[loc[m]]

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .description import AreaLights, MaterialTable, MeshTable, PointLights, SceneDescription, SunLights
+from .description import (AreaLights, MaterialTable, MeshTable, PointLights, SceneDescription, SunLights,
+                          WorldMap)
 from .sampling import luminance
 
 
@@ -197,12 +198,45 @@ def _clean_lights(desc, issues, stats):
     return pl, sl, al
 
 
+def _clean_world_map(desc: SceneDescription, issues: list[Issue]) -> WorldMap | None:
+    """The environment map with NaN/Inf/negative texels set to 0 and an orthonormal rotation;
+    None (the constant ``world_radiance`` is used) for a map without texels."""
+    wm = desc.world_map
+    if wm is None:
+        return None
+    rad = wm.radiance
+    if rad.ndim != 3 or rad.shape[-1] != 3 or rad.shape[0] == 0 or rad.shape[1] == 0:
+        issues.append(Issue("warning", "empty_world_map",
+                            f"World: the environment image has no pixels (shape {rad.shape}); "
+                            "using the constant world colour"))
+        return None
+    bad = ~np.isfinite(rad) | (rad < 0)
+    if bad.any():
+        issues.append(Issue("warning", "bad_world_map",
+                            f"World: {int(bad.any(axis=2).sum())} environment texels are NaN, Inf or "
+                            "negative; rendered black"))
+        rad = np.where(bad, np.float32(0), rad)
+    rot = wm.rotation.astype(np.float64)
+    if not np.isfinite(rot).all():
+        issues.append(Issue("warning", "bad_world_rotation", "World: non-finite mapping rotation; ignored"))
+        rot = np.eye(3)
+    elif not np.allclose(rot @ rot.T, np.eye(3), atol=1e-4) or np.linalg.det(rot) <= 0:
+        issues.append(Issue("warning", "bad_world_rotation",
+                            "World: the mapping is not a rotation; using its nearest rotation"))
+        u, _, vt = np.linalg.svd(rot)
+        rot = u @ vt
+        if np.linalg.det(rot) <= 0:
+            rot = np.eye(3)
+    return WorldMap(rad, rot)
+
+
 def has_emitters(desc: SceneDescription) -> bool:
     """True when anything in a (clean) description emits light."""
     emissive = luminance(desc.materials.emission) > 0
     tri_emit = emissive[desc.mesh.material_ids].any() if desc.mesh.n_triangles else False
     return bool(len(desc.point_lights) or len(desc.sun_lights) or len(desc.area_lights) or tri_emit
-                or luminance(desc.world_radiance) > 0)
+                or luminance(desc.world_radiance) > 0
+                or (desc.world_map is not None and bool((luminance(desc.world_map.radiance) > 0).any())))
 
 
 def sanitize(desc: SceneDescription) -> Validated:
@@ -217,6 +251,7 @@ def sanitize(desc: SceneDescription) -> Validated:
     mesh = _clean_mesh(desc, issues, stats)
     mats = _clean_materials(desc.materials, issues)
     pl, sl, al = _clean_lights(desc, issues, stats)
+    desc = desc.replace(world_map=_clean_world_map(desc, issues))
     world = np.clip(np.nan_to_num(desc.world_radiance, nan=0.0, posinf=0.0), 0, None)
     if not np.isfinite(desc.world_radiance).all():
         issues.append(Issue("warning", "nonfinite_world", "World: NaN/Inf background colour, rendered black"))

@@ -19,7 +19,7 @@ from .camera import CameraExportError, camera_desc, render_size
 from .lights import LightCollector
 from .materials import MaterialCollector
 from .mesh import GEOMETRY_TYPES, read_mesh, transform_mesh
-from .world import world_radiance
+from .world import world_background
 
 __all__ = ["ExportCancelled", "ExportError", "ExportResult", "export_scene", "render_size"]
 
@@ -187,7 +187,7 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
     override = getattr(view_layer, "world_override", None)
     if override is not None:
         world = override
-    radiance, world_warnings = world_radiance(world)
+    radiance, world_map, world_warnings = world_background(world)
 
     warnings += materials.warnings + lights.warnings + world_warnings
     if scene.render.use_motion_blur:
@@ -202,6 +202,8 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         point_lights=points, sun_lights=suns, area_lights=areas,
         world_radiance=radiance, object_names=tuple(names),
     )
+    if world_map is not None:                            # an HDRI replaces world_radiance
+        desc = desc.replace(world_map=world_map)
     return ExportResult(
         description=desc, warnings=warnings, has_emitters=has_emitters,
         seconds=time.monotonic() - t0,

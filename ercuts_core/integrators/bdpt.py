@@ -254,7 +254,8 @@ class BDPTIntegrator(Integrator):
         self.n_cam = depth + 2 if hittable else depth + 1
         # The last light vertex only serves t = 1, which an orthographic camera lacks.
         self.n_light = depth if self.camera.is_delta_direction else depth + 1
-        self.env_pdf = float(lights.pdf_illuminate_env(1)[0])        # pmf(env)/(4π)
+        # Selection pmf of the environment (× its direction density: pbrt InfiniteLightDensity)
+        self.env_pmf = float(lights.pmf(np.array([lights.env_light]))[0]) if self.has_env else 0.0
         self.inv_disk = 1.0 / (np.pi * lights.radius**2)             # infinite-light disk
         self.on_connections = on_connections
 
@@ -348,7 +349,11 @@ class BDPTIntegrator(Integrator):
         lig.beta[0] = e.Le
         # Origin density incl. selection; for infinite lights the direction density
         # (pbrt-v3 InfiniteLightDensity: only ENV has one, the sun is a delta).
-        lig.pdf_fwd[0] = np.where(e.kind == ENV, self.env_pdf, np.where(e.kind == SUN, 0.0, e.pdf_pos))
+        env_dir = np.zeros(n)
+        m = e.kind == ENV
+        if m.any():
+            env_dir[m] = self.env_pmf * e.pdf_dir[m]     # pmf × density of the direction −d
+        lig.pdf_fwd[0] = np.where(e.kind == ENV, env_dir, np.where(e.kind == SUN, 0.0, e.pdf_pos))
         ok = (e.beta.max(axis=1) > 0) & (e.pdf_pos > 0) & (e.pdf_dir > 0)
         lanes = np.flatnonzero(ok)
         if len(lanes) and self.n_light > 1:
@@ -558,10 +563,10 @@ class BDPTIntegrator(Integrator):
         lights = self.scene.lights
         k = t - 1
         env, prim = cam.at("env", k, lane), cam.at("prim", k, lane)
-        Le = np.zeros((len(lane), 3))
-        Le[env] = lights.env_L
-        Le[~env] = lights.tri_radiance(prim[~env])
         pt = cam.rows(k, lane)
+        Le = np.zeros((len(lane), 3))
+        Le[env] = lights.env_radiance(-pt.wo[env])              # wo points back: −wo escaped
+        Le[~env] = lights.tri_radiance(prim[~env])
         c = pt.beta * Le
         keep = np.flatnonzero(c.max(axis=1) > 0)
         lane, s, t, k, env, prim, c = lane[keep], s[keep], t[keep], k[keep], env[keep], prim[keep], c[keep]
@@ -570,7 +575,10 @@ class BDPTIntegrator(Integrator):
         light = np.full(len(lane), max(lights.env_light, 0))
         light[~env] = lights.tri_light[prim[~env]]
         pdf_pos, pdf_dir = lights.pdf_emit(light, p, ng, wo)
-        pt_rev = np.where(env, self.env_pdf, pdf_pos)
+        env_pdf = np.zeros(len(lane))
+        if env.any():
+            env_pdf[env] = lights.pdf_illuminate_env(-wo[env])       # pmf × density of the direction
+        pt_rev = np.where(env, env_pdf, pdf_pos)
         cos_prev = np.abs(dot(cam.rows(k - 1, lane).ng, wo))
         ptm_rev = np.where(env, self.inv_disk * cos_prev, pdf_dir * g_prev)
         w = self._mis_weight(cam, None, lane, s, t, pt_rev, ptm_rev)

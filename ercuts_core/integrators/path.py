@@ -48,9 +48,9 @@ class PathIntegrator(Integrator):
             # Emission seen by this ray: environment on misses, emissive triangles on hits.
             if lights.env_light >= 0 and (~hit).any():
                 m = ~hit
-                Le = lights.env_radiance(int(m.sum()))
+                Le = lights.env_radiance(d[m])
                 w = np.ones(int(m.sum())) if depth == 0 else power_heuristic(
-                    prev_pdf[m], lights.pdf_illuminate_env(int(m.sum())))
+                    prev_pdf[m], lights.pdf_illuminate_env(d[m]))
                 visible_env = not (depth == 0 and s.film_transparent)
                 if visible_env:
                     L[min(depth, 2), idx[m]] += beta[m] * Le * w[:, None]

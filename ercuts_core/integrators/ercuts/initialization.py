@@ -131,9 +131,9 @@ def _emitter_seeds(scene, base, lanes, surf, d, beta, prev_pdf, depth, out_paths
         pdf_l[h] = lights.pdf_illuminate_tri(prev, surf.prim[h], surf.p[h], surf.ng[h])
     if lights.env_light >= 0 and (~hit).any():
         m = np.flatnonzero(~hit)
-        Le[m] = lights.env_L
+        Le[m] = lights.env_radiance(d[m])
         light[m] = lights.env_light
-        pdf_l[m] = lights.pdf_illuminate_env(len(m))
+        pdf_l[m] = lights.pdf_illuminate_env(d[m])
     ok = light >= 0
     if not ok.any():
         return

@@ -381,7 +381,7 @@ class ErcutsIntegrator:
         hit = g.valid
         L[0, hit] = scene.emission(g.surf.subset(np.flatnonzero(hit)))
         if lights.env_light >= 0 and not s.film_transparent:
-            L[0, ~hit] = lights.env_L
+            L[0, ~hit] = lights.env_radiance(-g.wo[~hit])           # wo = −(camera ray)
         nonvpl = np.isin(lights.kind, [POINT, SUN, ENV])
         if nonvpl.any() and hit.any():
             h = np.flatnonzero(hit)

@@ -194,7 +194,8 @@ def _walk_pdf(scene: BuiltScene, paths: PathBatch, rows: NDArray, j: NDArray) ->
 def _light_vertex_pdf(scene: BuiltScene, paths: PathBatch, rows: NDArray) -> NDArray:
     """Density of the light vertex x_k as sampled by ``illuminate`` from x_{k−1}, in the
     vertex's own measure: area (area lights, emissive triangles), counting (point, sun)
-    or solid angle (environment); the light-selection pmf included."""
+    or solid angle (environment: the density of the direction stored in slot k); the
+    light-selection pmf included."""
     lights = scene.lights
     light = paths.light[rows]
     kind, loc = lights.kind[light], lights.local[light]
@@ -203,7 +204,12 @@ def _light_vertex_pdf(scene: BuiltScene, paths: PathBatch, rows: NDArray) -> NDA
     area[a] = lights.ar_area[loc[a]]
     area[t] = lights.tri_area[loc[t]]
     out = lights.pmf(light) / area
-    out[kind == ENV] /= 4 * np.pi
+    env = kind == ENV
+    if lights.env_map is None:
+        out[env] /= 4 * np.pi                     # uniform sphere (kept bit-identical)
+    elif env.any():
+        e = rows[env]
+        out[env] *= lights.env_pdf_dir(slot_rows(paths.p, e, paths.k[e]))
     return out
 
 

@@ -194,7 +194,7 @@ def _emitted(scene: BuiltScene, paths: PathBatch, rows: NDArray, w_out: NDArray)
         out[m] = lights.sun_E[loc[m]]
     m = kind == ENV
     if m.any():
-        out[m] = lights.env_L
+        out[m] = lights.env_radiance(-w_out[m])     # radiance travelling along w_out
     return out
 
 

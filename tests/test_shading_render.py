@@ -160,3 +160,54 @@ def test_textured_emission_is_the_per_triangle_mean_and_sampled_by_power():
         assert len(scene.lights.emissive_tris) == 2
     finally:
         scene.close()
+
+
+def _alpha_plane(alpha_value=None, **kw) -> SceneDescription:
+    """:func:`textured_plane` whose grey texels are cut out (texture alpha 0), or with a
+    constant ``alpha_value``; the sky shows through."""
+    d = textured_plane(**kw)
+    tex = CHECKER.copy()
+    tex[0, 0, 3] = tex[1, 1, 3] = 0.0
+    prog = _image_program(0)
+    prog["outputs"]["alpha"] = alpha_value if alpha_value is not None else {"node": 1, "socket": "Alpha"}
+    m = d.materials
+    mats = MaterialTable(m.names, m.base_color, m.roughness, m.metallic, m.specular, m.emission,
+                         (json.dumps(prog),))
+    return d.replace(materials=mats, textures=TextureTable(("checker",), (tex,)))
+
+
+@pytest.mark.parametrize("alpha_value", [None, 0.25])
+def test_alpha_cutout_shows_the_sky_through_the_plane(alpha_value):
+    d = _alpha_plane(alpha_value)
+    sky = 1.5
+    if alpha_value is None:        # cut-out grey texels show the sky; orange ones reflect
+        expected = 0.5 * sky + 0.5 * CHECKER[1, 0, :3] * sky
+    else:                          # every texel: alpha·albedo·sky + (1 − alpha)·sky
+        expected = alpha_value * CHECKER[..., :3].mean(axis=(0, 1)) * sky + (1 - alpha_value) * sky
+    for integrator in ("PATH", "BDPT"):
+        img = render(d, RenderSettings(integrator=integrator, samples=16, seed=5, max_depth=2)).image
+        np.testing.assert_allclose(img[..., :3].reshape(-1, 3).mean(axis=0), expected, rtol=0.03,
+                                   err_msg=integrator)
+
+
+def test_alpha_cutout_casts_a_partial_shadow_and_integrators_agree():
+    """A cut-out plane (half its texels transparent) above a grey floor under the sky, seen
+    from the side: PATH and BDPT agree (shadow rays pass the cut-outs too)."""
+    d = _alpha_plane()
+    m = d.mesh
+    floor = np.array([[-3, -0.5, 3], [3, -0.5, 3], [3, -0.5, -3], [-3, -0.5, -3]], float)
+    pos = np.vstack([m.positions, floor])
+    tris = np.vstack([m.triangles, [[4, 5, 6], [4, 6, 7]]])
+    uvs = np.concatenate([m.uvs, np.zeros((2, 3, 2), np.float32)])
+    mats = d.materials
+    mats = MaterialTable(mats.names + ("Floor",), np.vstack([mats.base_color, [[0.6] * 3]]), [1, 1], [0, 0],
+                         [0, 0], np.zeros((2, 3)), mats.programs + ("",))
+    cam = CameraDesc(look_at((0.5, 1.0, 3.0), (0, -0.3, 0)), 20, 16, lens=30.0)
+    d = d.replace(mesh=MeshTable(pos, tris, [0, 0, 1, 1], [0, 0, 1, 1], uvs=uvs), materials=mats, camera=cam,
+                  object_names=("Cutout", "Floor"))
+    path = _energies(d, "PATH", range(4), samples=16, max_depth=4)
+    bdpt = _energies(d, "BDPT", range(4), samples=8, max_depth=4)
+    assert _z(path, bdpt) < 4.0, (path, bdpt)
+    opaque = d.replace(materials=MaterialTable(mats.names, mats.base_color, mats.roughness, mats.metallic,
+                                               mats.specular, mats.emission, ("",) * 2))
+    assert _energies(opaque, "PATH", range(2), samples=16, max_depth=4).mean() < 0.97 * path.mean()

@@ -50,8 +50,9 @@ def textured_plane(width: int = 16, height: int = 16, sky: float = 1.5) -> Scene
 def test_textured_plane_renders_the_texture_mean_under_a_uniform_sky():
     d = textured_plane()
     expected = CHECKER[..., :3].mean(axis=(0, 1)) * 1.5
-    for integrator in ("PATH", "BDPT"):
-        img = render(d, RenderSettings(integrator=integrator, samples=8, seed=3, max_depth=2)).image
+    for integrator in ("PATH", "BDPT", "ERCUTS"):
+        img = render(d, RenderSettings(integrator=integrator, samples=8, seed=3, max_depth=2,
+                                       chain_length=20, chains_per_pixel=0.5)).image
         got = img[..., :3].reshape(-1, 3).mean(axis=0)
         np.testing.assert_allclose(got, expected, rtol=0.02, err_msg=integrator)
     # The texture is really there: pixels of both checker colours, in the right layout

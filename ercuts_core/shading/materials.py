@@ -169,6 +169,17 @@ class SceneShading:
             out[lanes] = np.clip(program.evaluate(ctx, ["alpha"])["alpha"], 0.0, 1.0)
         return out
 
+    def emission_at(self, prim: NDArray, p: NDArray) -> NDArray:
+        """(N, 3) emitted radiance of emission programs at points p (N, 3) on triangles prim."""
+        out = np.zeros((len(prim), 3))
+        rows = self.tri_mat[prim]
+        b = self.mesh.barycentrics(prim, p)
+        ng = self.tri_ng[prim]
+        for program, lanes, lane_row in self._by_family(rows, self.row_emission[rows]):
+            ctx = self.mesh.context(prim[lanes], b[lanes], ng[lanes], ng[lanes], lane_row)
+            out[lanes] = np.maximum(program.evaluate(ctx, ["emission"])["emission"], 0.0)
+        return out
+
     def triangle_emission(self, emission: NDArray) -> NDArray:
         """(T, 3) per-triangle emitted radiance: the rows' constants, and for rows with an
         emission program the mean over a stratified grid of EMISSION_SAMPLES² points."""

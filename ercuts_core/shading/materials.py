@@ -1,5 +1,7 @@
 """Per-hit material parameters for the integrators: the scene's compiled programs, evaluated
-material by material over the hits (no per-hit Python loops).
+over the hits one program family at a time (materials whose programs differ only in
+constants share one evaluation, :func:`~ercuts_core.shading.program.merge`; no per-hit
+Python loops).
 
 Shading keys (how path vertices carry textured materials). Every integrator stores a
 ``mat`` integer per surface vertex next to its position p, ns and ng. :class:`SceneShading`
@@ -15,10 +17,11 @@ The normal output (normal map / bump) is applied once, when the hit is made
 (:meth:`SceneShading.shading_normals`), and travels in the vertex's ``ns``; the BSDF
 parameters are re-evaluated whenever a BSDF is built (:meth:`SceneShading.bsdf_params`).
 
-Emission programs: a triangle's emission is the mean of its program's emission over
-``EMISSION_SAMPLES`` stratified points (a per-triangle constant, the same for light
-sampling, hits and light tracing, so every integrator stays unbiased for that scene; a
-documented approximation of textured emitters finer than the triangles).
+Emission programs: the emitted radiance is evaluated at each point (hits, light samples,
+emitted subpaths: :meth:`SceneShading.emission_at`); the light *choice* by power uses each
+triangle's mean over ``EMISSION_SAMPLES``² stratified points
+(:meth:`SceneShading.triangle_emission`), which only changes the variance. A triangle whose
+mean is 0 is not an emitter.
 """
 from __future__ import annotations
 

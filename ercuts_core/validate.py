@@ -151,7 +151,8 @@ def _clean_corner_attribute(desc: SceneDescription, values, name: str, width: in
     mesh = desc.mesh
     if values.shape != (mesh.n_triangles, 3, width):
         issues.append(Issue("warning", f"{name}_shape",
-                            f"Mesh {name} have shape {values.shape}, expected ({mesh.n_triangles}, 3, {width}): "
+                            f"Mesh {name} have shape {values.shape}, "
+                            f"expected ({mesh.n_triangles}, 3, {width}): "
                             f"{name} ignored"))
         return None
     bad = ~np.isfinite(values).all(axis=(1, 2))
@@ -278,6 +279,10 @@ def _clean_lights(desc, issues, stats):
 def has_emitters(desc: SceneDescription) -> bool:
     """True when anything in a (clean) description emits light."""
     emissive = luminance(desc.materials.emission) > 0
+    if desc.materials.has_programs:     # an emission program may light a row with no constant
+        for row, text in enumerate(desc.materials.programs):
+            program = compile_program(text, "", len(desc.textures))[0]
+            emissive[row] |= program is not None and program.has("emission")
     tri_emit = emissive[desc.mesh.material_ids].any() if desc.mesh.n_triangles else False
     return bool(len(desc.point_lights) or len(desc.sun_lights) or len(desc.area_lights) or tri_emit
                 or luminance(desc.world_radiance) > 0)

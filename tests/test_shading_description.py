@@ -133,3 +133,13 @@ def test_a_render_with_a_bad_program_reports_and_does_not_raise():
     r = render(d, RenderSettings(integrator="PATH", samples=2))
     assert np.isfinite(r.image).all()
     assert any("Material 'Red'" in str(i) for i in r.issues)
+
+
+def test_an_emission_program_counts_as_a_light():
+    prog = '{"version": 1, "nodes": [], "outputs": {"emission": [2.0, 2.0, 2.0]}}'
+    d = cornell_box(16, 12, "area").replace(
+        area_lights=cornell_box(16, 12, "mesh").area_lights)          # no area light, no emission
+    d = _textured(d, programs=(prog, "", "", ""), images=())
+    v = sanitize(d)
+    assert "no_lights" not in [i.code for i in v.issues]
+    assert "no_lights" in [i.code for i in sanitize(_textured(d, programs=("",) * 4, images=())).issues]

@@ -57,7 +57,8 @@ class AlphaTracer:
         o = np.asarray(o, np.float64)
         d = np.asarray(d, np.float64)
         n = len(o)
-        far = np.full(n, np.inf) if tmax is None else np.broadcast_to(np.asarray(tmax, np.float64), (n,)).copy()
+        far = np.full(n, np.inf) if tmax is None else \
+            np.broadcast_to(np.asarray(tmax, np.float64), (n,)).copy()
         hit = self._tracer.intersect(o, d, None if tmax is None else far)
         todo = np.arange(n)
         for k in range(MAX_CROSSINGS):

@@ -265,7 +265,8 @@ def vect_math(inp, params, ctx):
 
 
 def _wrap(value, lo_or_max, hi_or_min):
-    """Cycles ``wrapf(value, max, min)``: range = max − min; value − range·floor((value − min)/range)."""
+    """Cycles ``wrapf(value, max, min)``: range = max − min;
+    value − range·floor((value − min)/range)."""
     rng = lo_or_max - hi_or_min
     return np.where(rng != 0.0, value - rng * np.floor(_safe_div(value - hi_or_min, rng)), hi_or_min)
 
@@ -440,7 +441,8 @@ def mix(inp, params, ctx):
     if data == "VECTOR":
         return {"Result": (_lerp(inp.vec("A"), inp.vec("B"), t), V)}
     mode = params.get("blend_type", "MIX")
-    out = _blend(mode if mode in BLEND_MODES else "MIX", t, inp.vec("A", (0.5,) * 3), inp.vec("B", (0.5,) * 3))
+    out = _blend(mode if mode in BLEND_MODES else "MIX", t, inp.vec("A", (0.5,) * 3),
+                 inp.vec("B", (0.5,) * 3))
     if params.get("clamp_result", False):
         out = np.clip(out, 0.0, 1.0)
     return {"Result": (out, C)}

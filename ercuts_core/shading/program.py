@@ -129,7 +129,8 @@ def _parse(data, n_textures: int, notes: list[str]) -> "Program":
             raise ProgramError(f"node {i} ({kind}): 'inputs' and 'params' must be objects")
         node = Node(kind, {}, params)
         nodes.append(node)
-        parsed = {str(k): _parse_value(v, i, nodes, f"node {i} ({kind}) input {k!r}") for k, v in inputs.items()}
+        parsed = {str(k): _parse_value(v, i, nodes, f"node {i} ({kind}) input {k!r}")
+                  for k, v in inputs.items()}
         nodes[i] = _check_params(i, replace(node, inputs=parsed), n_textures, notes)
     raw_out = data.get("outputs", {}) or {}
     if not isinstance(raw_out, dict):
@@ -228,7 +229,8 @@ class Program:
         if "normal" in out:
             nrm = out["normal"]
             length = np.linalg.norm(nrm, axis=1)
-            out["normal"] = np.where((length > 1e-12)[:, None], nrm / np.maximum(length, 1e-300)[:, None], ctx.ns)
+            unit = nrm / np.maximum(length, 1e-300)[:, None]
+            out["normal"] = np.where((length > 1e-12)[:, None], unit, ctx.ns)
         return out
 
 

@@ -11,11 +11,15 @@ like Cycles; objects without a material get Cycles' default grey diffuse.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .. import compat
+from .images import TextureCollector
+from .shaders import compile_material
+from .shaders import output_node as output_node  # noqa: F401  (re-exported for lights/world)
 
 #: Cycles' default surface (objects without material, unsupported shaders): grey diffuse.
 DEFAULT_GREY = (0.8, 0.8, 0.8)
@@ -32,6 +36,11 @@ class MaterialRow:
     metallic: float = 0.0
     specular: float = 0.0
     emission: tuple = (0.0, 0.0, 0.0)
+    #: shading program (JSON, ``ercuts_core.shading``); "" = the constants above
+    program: str = ""
+    uses_uvs: bool = False
+    uses_tangents: bool = False
+    uv_maps: frozenset = frozenset()
 
     @property
     def is_emissive(self) -> bool:
@@ -95,76 +104,25 @@ def follow_link(socket):
     return None, None
 
 
-def output_node(node_tree):
-    """The active output node Cycles would use (``get_output_node`` exists on 3.x and 5.x)."""
-    return node_tree.get_output_node("CYCLES") or node_tree.get_output_node("ALL")
-
-
-def read_material(mat) -> tuple[MaterialRow, list[str]]:
-    """One material's row, and the list of things that could not be translated."""
-    reader = _Reader(mat.name)
+def read_material(mat, textures=None) -> tuple[MaterialRow, list[str]]:
+    """One material's row (with its shading program), and the list of things that could
+    not be translated. ``textures``: the scene's :class:`.images.TextureCollector`."""
     if not compat.uses_nodes(mat):
         row = MaterialRow(mat.name, base_color=tuple(float(c) for c in mat.diffuse_color[:3]))
-        return row, reader.notes
-    out = output_node(mat.node_tree)
-    if out is None:
-        reader.note("no material output node")
-        return MaterialRow(mat.name, base_color=(0.0, 0.0, 0.0)), reader.notes
-    surface, _ = follow_link(out.inputs.get("Surface"))
-    if surface is None:  # nothing connected: Cycles renders black
-        return MaterialRow(mat.name, base_color=(0.0, 0.0, 0.0)), reader.notes
-    kind = surface.bl_idname
-    if kind == "ShaderNodeBsdfPrincipled":
-        row = _principled(surface, reader)
-    elif kind == "ShaderNodeBsdfDiffuse":
-        row = MaterialRow(mat.name, base_color=reader.color(surface.inputs.get("Color")))
-        if reader.scalar(surface.inputs.get("Roughness")) > 0.0:
-            reader.note("Diffuse BSDF roughness (Oren-Nayar) ignored, rendered as Lambert")
-    elif kind == "ShaderNodeEmission":
-        color = np.array(reader.color(surface.inputs.get("Color"), (1.0, 1.0, 1.0)))
-        strength = reader.scalar(surface.inputs.get("Strength"), 1.0)
-        row = MaterialRow(mat.name, base_color=(0.0, 0.0, 0.0), specular=0.0,
-                          emission=tuple(color * strength))
-    else:
-        reader.note(f"unsupported shader '{surface.name}' ({kind}), rendered as grey diffuse")
-        row = MaterialRow(mat.name)
-    row.name = mat.name
-    return row, reader.notes
-
-
-def _principled(node, reader: _Reader) -> MaterialRow:
-    get = lambda concept: compat.principled_input(node, concept)  # noqa: E731
-    base = reader.color(get("base_color"))
-    roughness = reader.scalar(get("roughness"), 0.5)
-    metallic = reader.scalar(get("metallic"), 0.0)
-    specular = compat.principled_specular(reader.scalar(get("specular"), 0.5),
-                                          reader.scalar(get("ior"), 1.5))
-    e_color = np.array(reader.color(get("emission_color"), (0.0, 0.0, 0.0)))
-    e_strength = reader.scalar(get("emission_strength"), 1.0)
-    for concept, label in (("transmission", "transmission"), ("coat", "coat"),
-                           ("sheen", "sheen"), ("subsurface", "subsurface")):
-        if reader.scalar(get(concept), 0.0) > 0.0:
-            reader.note(f"Principled {label} ignored")
-    if reader.scalar(get("alpha"), 1.0) < 1.0:
-        reader.note("Principled alpha ignored (rendered opaque)")
-    normal = get("normal")
-    if normal is not None and normal.is_linked:
-        reader.note("normal/bump input ignored")
-    return MaterialRow(
-        name=reader.name,
-        base_color=tuple(np.clip(base, 0.0, 1.0)),
-        roughness=float(np.clip(roughness, 0.0, 1.0)),
-        metallic=float(np.clip(metallic, 0.0, 1.0)),
-        specular=max(specular, 0.0),
-        emission=tuple(np.maximum(e_color * e_strength, 0.0)),
-    )
+        return row, []
+    compiled = compile_material(mat, textures)
+    row = MaterialRow(mat.name, **compiled.constants, program=compiled.program,
+                      uses_uvs=compiled.uses_uvs, uses_tangents=compiled.uses_tangents,
+                      uv_maps=frozenset(compiled.uv_maps))
+    return row, compiled.notes
 
 
 class MaterialCollector:
     """Builds the scene's material table: one row per distinct Blender material."""
 
-    def __init__(self, override=None):
+    def __init__(self, override=None, textures: TextureCollector | None = None):
         self.override = override
+        self.textures = textures if textures is not None else TextureCollector()
         self.rows: list[MaterialRow] = []
         self.warnings: list[str] = []
         self._index: dict[str, int] = {}
@@ -180,7 +138,7 @@ class MaterialCollector:
         if mat is None:
             material = MaterialRow(DEFAULT_MATERIAL_NAME)
         else:
-            material, notes = read_material(mat)
+            material, notes = read_material(mat, self.textures)
             if notes:
                 self.warnings.append(f"Material '{mat.name}': " + "; ".join(notes))
         self._index[key] = len(self.rows)
@@ -198,6 +156,12 @@ class MaterialCollector:
         from ercuts_core.description import MaterialTable
 
         rows = self.rows or [MaterialRow(DEFAULT_MATERIAL_NAME)]
+        extra = {}
+        if any(r.program for r in rows):
+            if "programs" not in {f.name for f in dataclasses.fields(MaterialTable)}:
+                self.warnings.append("textured materials need a newer core: rendered with constants")
+            else:
+                extra["programs"] = tuple(r.program for r in rows)
         return MaterialTable(
             names=tuple(r.name for r in rows),
             base_color=np.array([r.base_color for r in rows], np.float32).reshape(-1, 3),
@@ -205,4 +169,5 @@ class MaterialCollector:
             metallic=np.array([r.metallic for r in rows], np.float32),
             specular=np.array([r.specular for r in rows], np.float32),
             emission=np.array([r.emission for r in rows], np.float32).reshape(-1, 3),
+            **extra,
         )

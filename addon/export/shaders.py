@@ -231,7 +231,11 @@ class _Compiler:
             if not socket.is_linked:
                 return "const", _default(socket, kind), None, ctx
             link = socket.links[0]
-            if getattr(link, "is_muted", False) or not link.is_valid:
+            if not link.is_valid:
+                self.note(f"invalid link from '{link.from_node.name}' to '{link.to_node.name}' "
+                          f"(a cycle or incompatible sockets) ignored")
+                return "const", _default(socket, kind), None, ctx
+            if getattr(link, "is_muted", False):
                 return "const", _default(socket, kind), None, ctx
             node, out = link.from_node, link.from_socket
             ntype = node.type

@@ -20,6 +20,7 @@ from .description import (
                           save_npz,
 )
 from .render import render
+from .shading.textures import TextureTable
 from .result import RenderResult
 from .settings import RenderSettings
 from .validate import Issue, SceneError
@@ -29,5 +30,5 @@ __version__ = "0.1.0"
 __all__ = [
     "AreaLights", "CameraDesc", "Issue", "MaterialTable", "MeshTable", "PointLights",
     "RenderResult", "RenderSettings", "SceneDescription", "SceneError", "SunLights",
-    "load_npz", "render", "save_npz", "__version__",
+    "TextureTable", "load_npz", "render", "save_npz", "__version__",
 ]

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .atomic import atomic_path
+from .shading.textures import TextureTable
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -64,6 +65,11 @@ class MeshTable:
         normals: (V, 3) float32 unit shading normals, or None (all faces flat).
         smooth: (T,) bool, True where the face uses interpolated ``normals``;
             None means "smooth wherever normals are given".
+        uvs: (T, 3, 2) float32 per-corner UV of the active render UV map, or None
+            (no UV map: every hit reads UV (0, 0), as Cycles does).
+        tangents: (T, 3, 4) float32 per-corner world-space MikkTSpace tangent xyz and
+            bitangent sign w (Blender's ``calc_tangents``), or None (normal maps then
+            use a tangent frame built from the shading normal, see ``shading.geometry``).
     """
 
     positions: F32
@@ -72,6 +78,8 @@ class MeshTable:
     object_ids: I32
     normals: F32 | None = None
     smooth: NDArray[np.bool_] | None = None
+    uvs: F32 | None = None
+    tangents: F32 | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "positions", _f32(self.positions, (3,)))
@@ -83,6 +91,10 @@ class MeshTable:
             object.__setattr__(self, "normals", _f32(self.normals, (3,)))
         if self.smooth is not None:
             object.__setattr__(self, "smooth", np.ascontiguousarray(self.smooth, dtype=bool).reshape(-1))
+        if self.uvs is not None:
+            object.__setattr__(self, "uvs", _f32(self.uvs, (3, 2)))
+        if self.tangents is not None:
+            object.__setattr__(self, "tangents", _f32(self.tangents, (3, 4)))
 
     @property
     def n_triangles(self) -> int:
@@ -103,6 +115,8 @@ class MaterialTable:
         metallic: (M,) float32 in [0, 1].
         specular: (M,) float32 Principled "Specular (IOR Level)"; 0.5 ↔ F0 = 0.04; 0 = pure Lambert.
         emission: (M, 3) float32 emitted radiance [W·sr⁻¹·m⁻²] (colour × strength), two-sided.
+        programs: per row, a shading program as JSON (format: :mod:`ercuts_core.shading`),
+            or "" for the row's constants only. Default (``()``): "" for every row.
     """
 
     names: tuple[str, ...]
@@ -111,9 +125,12 @@ class MaterialTable:
     metallic: F32
     specular: F32
     emission: F32
+    programs: tuple[str, ...] = ()
 
     def __post_init__(self):
         object.__setattr__(self, "names", tuple(str(n) for n in self.names))
+        programs = tuple(str(p) for p in self.programs)
+        object.__setattr__(self, "programs", programs if programs else ("",) * len(self.names))
         object.__setattr__(self, "base_color", _f32(self.base_color, (3,)))
         object.__setattr__(self, "emission", _f32(self.emission, (3,)))
         for name in ("roughness", "metallic", "specular"):
@@ -123,13 +140,19 @@ class MaterialTable:
     def n_materials(self) -> int:
         return len(self.names)
 
+    @property
+    def has_programs(self) -> bool:
+        """True when any row has a shading program (else every row is constant)."""
+        return any(self.programs)
+
     @staticmethod
-    def diffuse(names, base_color, emission=None) -> "MaterialTable":
+    def diffuse(names, base_color, emission=None, programs=()) -> "MaterialTable":
         """Pure Lambertian materials (specular 0, metallic 0, roughness 1)."""
         base = np.asarray(base_color, np.float32).reshape(-1, 3)
         m = base.shape[0]
         em = np.zeros((m, 3), np.float32) if emission is None else np.asarray(emission, np.float32)
-        return MaterialTable(tuple(names), base, np.ones(m), np.zeros(m), np.zeros(m), em)
+        return MaterialTable(tuple(names), base, np.ones(m), np.zeros(m), np.zeros(m), em,
+                             tuple(programs))
 
 
 @dataclass(frozen=True)
@@ -294,6 +317,7 @@ class SceneDescription:
 
     ``camera`` may be None only so that validation can report "no camera" as an error.
     ``world_radiance`` is the constant background radiance (3,) [W·sr⁻¹·m⁻²].
+    ``textures`` holds the images the materials' programs read (empty by default).
     """
 
     mesh: MeshTable
@@ -305,6 +329,7 @@ class SceneDescription:
     world_radiance: F32 = field(default_factory=lambda: np.zeros(3, np.float32))
     object_names: tuple[str, ...] = ()
     schema_version: int = SCHEMA_VERSION
+    textures: TextureTable = field(default_factory=TextureTable)
 
     def __post_init__(self):
         object.__setattr__(self, "world_radiance", _f32(self.world_radiance, ()).reshape(3))
@@ -370,6 +395,9 @@ def save_npz(desc: SceneDescription, path: str | os.PathLike) -> None:
             value = getattr(obj, f.name)
             if value is not None:
                 data[f"{part}.{f.name}"] = _to_array(value)
+    data["textures.names"] = _to_array(desc.textures.names)
+    for i, image in enumerate(desc.textures.images):
+        data[f"textures.image.{i}"] = image
     with atomic_path(path, ".npz") as tmp:  # the suffix: numpy appends .npz to other names
         np.savez_compressed(tmp, **data)
 
@@ -388,6 +416,8 @@ def load_npz(path: str | os.PathLike) -> SceneDescription:
             if kwargs:
                 parts[part] = cls(**kwargs)
         names = z["object_names"]
+        tex_names = tuple(str(s) for s in z["textures.names"].reshape(-1)) if "textures.names" in keys else ()
+        textures = TextureTable(tex_names, tuple(z[f"textures.image.{i}"] for i in range(len(tex_names))))
         return SceneDescription(
             mesh=parts["mesh"],
             materials=parts["materials"],
@@ -398,4 +428,5 @@ def load_npz(path: str | os.PathLike) -> SceneDescription:
             world_radiance=z["world_radiance"],
             object_names=tuple(str(s) for s in names.reshape(-1)),
             schema_version=int(z["schema_version"]),
+            textures=textures,
         )

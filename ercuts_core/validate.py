@@ -18,6 +18,7 @@ import numpy as np
 
 from .description import AreaLights, MaterialTable, MeshTable, PointLights, SceneDescription, SunLights
 from .sampling import luminance
+from .shading.textures import TextureTable, missing_image
 
 
 class SceneError(ValueError):
@@ -133,8 +134,32 @@ def _clean_mesh(desc: SceneDescription, issues: list[Issue], stats: dict[str, in
         normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
         tri_ok = (ok if nv else np.zeros(1, bool))[safe].all(axis=1) if len(tris) else ok[:0]
         smooth = (np.ones(len(tris), bool) if smooth is None else smooth) & tri_ok
+    uvs = _clean_corner_attribute(desc, mesh.uvs, "uvs", 2, issues)
+    tangents = _clean_corner_attribute(desc, mesh.tangents, "tangents", 4, issues)
     return MeshTable(pos, tris[keep], mat_ids[keep], mesh.object_ids[keep],
-                     normals, None if smooth is None else smooth[keep])
+                     normals, None if smooth is None else smooth[keep],
+                     None if uvs is None else uvs[keep], None if tangents is None else tangents[keep])
+
+
+def _clean_corner_attribute(desc: SceneDescription, values, name: str, width: int,
+                            issues: list[Issue]):
+    """Check a per-corner attribute ((T, 3, width) or None): wrong shape → warning and None
+    (no UVs: UV (0, 0); no tangents: a frame from the normal); NaN/Inf → 0, warning per object."""
+    if values is None:
+        return None
+    mesh = desc.mesh
+    if values.shape != (mesh.n_triangles, 3, width):
+        issues.append(Issue("warning", f"{name}_shape",
+                            f"Mesh {name} have shape {values.shape}, expected ({mesh.n_triangles}, 3, {width}): "
+                            f"{name} ignored"))
+        return None
+    bad = ~np.isfinite(values).all(axis=(1, 2))
+    if bad.any():
+        for obj, n in _per_object(desc, mesh.object_ids[bad]):
+            issues.append(Issue("warning", f"nonfinite_{name}",
+                                f"Object '{obj}': {n} triangle(s) with NaN/Inf {name}, replaced by 0", obj))
+        values = np.where(np.isfinite(values), values, 0.0).astype(np.float32)
+    return values
 
 
 def _clean_materials(mats: MaterialTable, issues: list[Issue]) -> MaterialTable:
@@ -150,6 +175,12 @@ def _clean_materials(mats: MaterialTable, issues: list[Issue]) -> MaterialTable:
     for i in np.flatnonzero(bad):
         issues.append(Issue("warning", "nonfinite_material",
                             f"Material '{mats.names[i]}': NaN/Inf values replaced by defaults (no emission)"))
+    programs = mats.programs
+    if len(programs) != mats.n_materials:
+        issues.append(Issue("warning", "program_count_mismatch",
+                            f"{len(programs)} shading programs for {mats.n_materials} materials: "
+                            "programs ignored (constant materials)"))
+        programs = ("",) * mats.n_materials
     return MaterialTable(
         mats.names + ("Ercuts fallback grey",),
         np.vstack([fix(mats.base_color, 0, 1, 0.8), [[0.8, 0.8, 0.8]]]),
@@ -158,7 +189,36 @@ def _clean_materials(mats: MaterialTable, issues: list[Issue]) -> MaterialTable:
         np.append(fix(mats.specular, 0, 1, 0.5), 0.0),
         np.vstack([np.where(np.isfinite(mats.emission), np.maximum(mats.emission, 0), 0),
                    [[0, 0, 0]]]).reshape(-1, 3),
+        programs + ("",),
     )
+
+
+def _clean_image(name: str, image, issues: list[Issue]) -> np.ndarray:
+    """One texture as (H, W, 4) float32: grey (H, W) and RGB (H, W, 3) images gain alpha 1;
+    empty or malformed images become Cycles' magenta 1×1; NaN/Inf texels become 0."""
+    im = np.asarray(image, np.float32)
+    if im.ndim == 2:
+        im = im[:, :, None]
+    if im.ndim == 3 and im.shape[2] in (1, 3) and im.size:
+        rgb = np.repeat(im, 3, axis=2) if im.shape[2] == 1 else im
+        im = np.concatenate([rgb, np.ones(im.shape[:2] + (1,), np.float32)], axis=2)
+    if im.ndim != 3 or im.shape[2] != 4 or im.size == 0:
+        issues.append(Issue("warning", "empty_image",
+                            f"Image '{name}' is empty or has shape {im.shape}: rendered magenta"))
+        return missing_image()
+    finite = np.isfinite(im)
+    if not finite.all():
+        issues.append(Issue("warning", "nonfinite_image",
+                            f"Image '{name}': {int((~finite).sum())} NaN/Inf texel value(s) replaced by 0"))
+        im = np.where(finite, im, 0.0).astype(np.float32)
+    return np.ascontiguousarray(im)
+
+
+def _clean_textures(textures: TextureTable, issues: list[Issue]) -> TextureTable:
+    names = list(textures.names)[:len(textures.images)]
+    names += [f"#{i}" for i in range(len(names), len(textures.images))]
+    return TextureTable(tuple(names), tuple(_clean_image(n, im, issues)
+                                            for n, im in zip(names, textures.images)))
 
 
 def _finite_rows(desc, arrays, object_ids, kind, issues) -> np.ndarray:
@@ -220,8 +280,9 @@ def sanitize(desc: SceneDescription) -> Validated:
     world = np.clip(np.nan_to_num(desc.world_radiance, nan=0.0, posinf=0.0), 0, None)
     if not np.isfinite(desc.world_radiance).all():
         issues.append(Issue("warning", "nonfinite_world", "World: NaN/Inf background colour, rendered black"))
+    textures = _clean_textures(desc.textures, issues)
     clean = desc.replace(mesh=mesh, materials=mats, point_lights=pl, sun_lights=sl, area_lights=al,
-                         world_radiance=world)
+                         world_radiance=world, textures=textures)
     if not has_emitters(clean):
         issues.append(Issue("warning", "no_lights",
                             "Scene has no lights (or all lights have zero power): the image is black"))

@@ -11,7 +11,6 @@ like Cycles; objects without a material get Cycles' default grey diffuse.
 """
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -156,12 +155,6 @@ class MaterialCollector:
         from ercuts_core.description import MaterialTable
 
         rows = self.rows or [MaterialRow(DEFAULT_MATERIAL_NAME)]
-        extra = {}
-        if any(r.program for r in rows):
-            if "programs" not in {f.name for f in dataclasses.fields(MaterialTable)}:
-                self.warnings.append("textured materials need a newer core: rendered with constants")
-            else:
-                extra["programs"] = tuple(r.program for r in rows)
         return MaterialTable(
             names=tuple(r.name for r in rows),
             base_color=np.array([r.base_color for r in rows], np.float32).reshape(-1, 3),
@@ -169,5 +162,5 @@ class MaterialCollector:
             metallic=np.array([r.metallic for r in rows], np.float32),
             specular=np.array([r.specular for r in rows], np.float32),
             emission=np.array([r.emission for r in rows], np.float32).reshape(-1, 3),
-            **extra,
+            programs=tuple(r.program for r in rows),
         )

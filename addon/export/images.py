@@ -13,17 +13,23 @@ Colour space (what ``image.pixels`` returns, and what Cycles does with it):
   used untouched with a note.
 * float images (EXR, HDR, float generated images) are already scene-linear: untouched.
 
-Alpha (Blender's ``alpha_mode``, as Cycles reads it):
+Alpha (Blender's ``alpha_mode``), as measured with Cycles in the same Blender (bpy 5.0.1:
+an emission plane textured with a 50 % alpha image, Alpha output linked or not):
 
-* STRAIGHT (default): byte pixels are straight alpha: used as they are. Float buffers are
-  stored premultiplied by Blender (ImBuf's convention), so they are un-premultiplied.
-* PREMUL: un-premultiplied (RGB / alpha where alpha > 0) before linearisation.
-* CHANNEL_PACKED: RGB and alpha are independent data: untouched.
-* NONE: alpha ignored: set to 1.
+* byte images, STRAIGHT and PREMUL alike: ``image.pixels`` is what Cycles reads as straight
+  colour (Cycles rendered EOTF(0.4) for a PREMUL pixel 0.4 with the Alpha output linked):
+  used as they are.
+* float buffers are premultiplied (ImBuf's convention: Cycles rendered 1.6 for a float pixel
+  0.8 at alpha 0.5 with Alpha linked): un-premultiplied (RGB / alpha where alpha > 0).
+* CHANNEL_PACKED: RGB and alpha are independent data: untouched. NONE: alpha set to 1.
 
-Cycles' Image Texture node outputs a premultiplied colour unless its Alpha output is
-linked (for non-data, non-channel-packed images); :attr:`TextureInfo.associates` tells the
-shader compiler when that matters (some alpha below 1), it then multiplies Color by Alpha.
+Cycles' Image Texture outputs an *associated* (premultiplied) colour when its Alpha output
+is not linked, except for data (Non-Color), channel-packed and alpha-less images; for byte
+sRGB images the premultiplication happens on the encoded values (measured: 0.1326 =
+EOTF(0.8 · 0.5), not 0.5 · EOTF(0.8) = 0.302). Such a texture node therefore reads a
+second row, the image's *associated variant* (``index_of(..., associated=True)``): RGB =
+EOTF(c·α) for byte sRGB, (linear c)·α otherwise, alpha unchanged. It exists only for images
+with some alpha below 1 read that way.
 
 A missing or unloadable image (no file, zero size, no pixels) becomes a 1×1 magenta texture
 (Cycles' missing-texture colour, RGBA (1, 0, 1, 1)) with one warning naming image and
@@ -52,7 +58,6 @@ class TextureInfo:
 
     mean_color: tuple
     mean_alpha: float
-    associates: bool
 
 
 def _is_linear_space(name: str) -> bool:
@@ -60,21 +65,24 @@ def _is_linear_space(name: str) -> bool:
     return n.startswith("linear") or n in {"scene_linear", "scene linear"}
 
 
-def read_image(image) -> tuple[np.ndarray | None, list[str]]:
-    """(H, W, 4) float32 linear straight-alpha pixels of ``image``, or None if unloadable."""
+def read_image(image) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
+    """(straight, associated, notes): (H, W, 4) float32 linear straight-alpha pixels of
+    ``image`` and Cycles' associated-colour variant (None when it equals the straight one:
+    no alpha below 1, data, channel-packed or NONE alpha), or (None, None, notes) if the
+    image cannot be loaded."""
     notes: list[str] = []
     try:
         w, h = (int(x) for x in image.size)
         if w <= 0 or h <= 0:
-            return None, notes
+            return None, None, notes
         n = len(image.pixels)
         if n == 0 or n % (w * h):
-            return None, notes
+            return None, None, notes
         channels = n // (w * h)
         buf = np.empty(n, np.float32)
         image.pixels.foreach_get(buf)
     except (RuntimeError, ReferenceError, ValueError, OSError):
-        return None, notes
+        return None, None, notes
     px = buf.reshape(h, w, channels)
     if channels == 4:
         rgba = px.copy()
@@ -94,18 +102,28 @@ def read_image(image) -> tuple[np.ndarray | None, list[str]]:
     is_float = bool(getattr(image, "is_float", False))
     if mode == "NONE":
         rgba[..., 3] = 1.0
-    elif mode == "PREMUL" or (is_float and mode == "STRAIGHT"):
+    elif is_float and mode != "CHANNEL_PACKED":
         a = rgba[..., 3:4]
         with np.errstate(divide="ignore", invalid="ignore"):  # alpha 0: colour kept as stored
             rgba[..., :3] = np.where(a > 0, rgba[..., :3] / np.where(a > 0, a, 1), rgba[..., :3])
     settings = image.colorspace_settings
     space = settings.name
-    if not is_float:
-        if space == "sRGB":
-            rgba[..., :3] = srgb_to_linear(rgba[..., :3])
-        elif not (getattr(settings, "is_data", False) or _is_linear_space(space)):
-            notes.append(f"colour space '{space}' not converted (read as linear)")
-    return np.ascontiguousarray(rgba, np.float32), notes
+    data = bool(getattr(settings, "is_data", False))
+    srgb = not is_float and space == "sRGB"
+    associated = None
+    if not data and mode not in {"CHANNEL_PACKED", "NONE"} and (rgba[..., 3] < 1.0).any():
+        associated = rgba.copy()
+        associated[..., :3] *= rgba[..., 3:4]
+        if srgb:
+            associated[..., :3] = srgb_to_linear(associated[..., :3])
+    if srgb:
+        rgba[..., :3] = srgb_to_linear(rgba[..., :3])
+    elif not is_float and not (data or _is_linear_space(space)):
+        notes.append(f"colour space '{space}' not converted (read as linear)")
+    if associated is not None and not srgb:
+        associated[..., :3] = rgba[..., :3] * rgba[..., 3:4]
+    return (np.ascontiguousarray(rgba, np.float32),
+            None if associated is None else np.ascontiguousarray(associated, np.float32), notes)
 
 
 class TextureCollector:
@@ -117,32 +135,36 @@ class TextureCollector:
         self.infos: list[TextureInfo] = []
         self.warnings: list[str] = []
         self._index: dict = {}
+        self._pending: dict = {}
 
-    def index_of(self, image, material_name: str) -> tuple[int, TextureInfo]:
-        key = image.original.name_full if hasattr(image, "original") else image.name_full
-        row = self._index.get(key)
-        if row is not None:
-            return row, self.infos[row]
-        pixels, notes = read_image(image)
-        if pixels is None:
-            self.warnings.append(f"Image '{image.name}' (material '{material_name}') is missing or "
-                                 f"cannot be loaded: rendered magenta")
-            pixels = MAGENTA.copy()
-        for note in notes:
-            self.warnings.append(f"Image '{image.name}' (material '{material_name}'): {note}")
-        alpha = pixels[..., 3]
-        settings = image.colorspace_settings
-        data = bool(getattr(settings, "is_data", False))
-        mode = getattr(image, "alpha_mode", "STRAIGHT")
-        associates = bool((alpha < 1.0).any()) and not data and mode not in {"CHANNEL_PACKED", "NONE"}
+    def index_of(self, image, material_name: str, associated: bool = False) -> tuple[int, TextureInfo]:
+        """Row of ``image`` (read on first use); ``associated``: the row Cycles' Color output
+        reads when the node's Alpha output is unused (the same row when no alpha < 1)."""
+        key = image.original.name_full
+        rows = self._index.get(key)
+        if rows is None:
+            straight, assoc, notes = read_image(image)
+            if straight is None:
+                self.warnings.append(f"Image '{image.name}' (material '{material_name}') is missing "
+                                     f"or cannot be loaded: rendered magenta")
+                straight = MAGENTA.copy()
+            for note in notes:
+                self.warnings.append(f"Image '{image.name}' (material '{material_name}'): {note}")
+            rows = self._index[key] = [self._add(image.name, straight), None]
+            self._pending[key] = assoc
+        if associated and self._pending.get(key) is not None:
+            if rows[1] is None:
+                rows[1] = self._add(image.name + " (associated alpha)", self._pending[key])
+            return rows[1], self.infos[rows[1]]
+        return rows[0], self.infos[rows[0]]
+
+    def _add(self, name: str, pixels: np.ndarray) -> int:
         info = TextureInfo(mean_color=tuple(float(x) for x in pixels[..., :3].reshape(-1, 3).mean(axis=0)),
-                           mean_alpha=float(alpha.mean()), associates=associates)
-        row = len(self.names)
-        self._index[key] = row
-        self.names.append(image.name)
+                           mean_alpha=float(pixels[..., 3].mean()))
+        self.names.append(name)
         self.images.append(pixels)
         self.infos.append(info)
-        return row, info
+        return len(self.names) - 1
 
     @property
     def nbytes(self) -> int:

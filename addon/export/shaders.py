@@ -50,10 +50,9 @@ What the compiler does
   textures, Map Range, Clamp, …) or an unsupported output socket (Texture Coordinate
   Camera/Window/Reflection, Light Path's other outputs) gives one note naming the node and
   the input's own default value.
-* Cycles' Image Texture outputs a *premultiplied* colour when its Alpha output is not
-  linked (nodes.cpp: ``NODE_IMAGE_ALPHA_UNASSOCIATE`` only when Alpha is used), except for
-  Non-Color, channel-packed and alpha-less images; the compiler then multiplies Color by
-  Alpha (``VECT_MATH SCALE``) when the image has any alpha below 1.
+* Cycles' Image Texture outputs an associated (premultiplied) colour when its Alpha output
+  is not linked (nodes.cpp: ``NODE_IMAGE_ALPHA_UNASSOCIATE`` only when Alpha is used);
+  the node then reads the image's associated-alpha texture row (:mod:`.images`).
 * A link cycle (or a group containing itself) is cut where it closes: one note, and the
   socket's default value there.
 """
@@ -418,10 +417,12 @@ class _Compiler:
         interpolation = {"Smart": "Cubic"}.get(node.interpolation, node.interpolation)
         if image is None:  # Cycles: an Image Texture without image is black (alpha 0? no: 0,0,0,1)
             return (0.0, 0.0, 0.0) if psocket == "Color" else 0.0
+        # Cycles: Color is associated (premultiplied) unless the Alpha output is used.
+        associated = not _linked(node.outputs["Alpha"])
         if self.textures is None:
             row, info = 0, None
         else:
-            row, info = self.textures.index_of(image, self.material_name)
+            row, info = self.textures.index_of(image, self.material_name, associated)
         if image.source in {"SEQUENCE", "MOVIE", "TILED"}:
             self.note(f"Image Texture '{node.name}': {image.source.lower()} image "
                       f"'{image.name}', using its first frame/tile")
@@ -430,12 +431,6 @@ class _Compiler:
         result = self.ref("TEX_IMAGE", {"Vector": coords}, psocket, params)
         if info is not None:
             self._estimates[result["node"]] = {"Color": info.mean_color, "Alpha": info.mean_alpha}
-        if (psocket == "Color" and info is not None and info.associates
-                and not _linked(node.outputs["Alpha"])):
-            alpha = {"node": result["node"], "socket": "Alpha"}
-            return self.ref("VECT_MATH", {"Vector": result, "Vector_001": [0.0] * 3,
-                                          "Vector_002": [0.0] * 3, "Scale": alpha},
-                            "Vector", {"operation": "SCALE"})
         return result
 
     def _n_valtorgb(self, node, out, ctx, ptype, psocket):

@@ -153,10 +153,13 @@ def test_float_image_untouched_and_premultiplied_alpha_undone():
     got = textures.images[0]
     assert np.allclose(got[0, 0], px[0, 0])
     assert np.allclose(got[0, 1], (0.4, 0.2, 0.1, 0.5))  # straight alpha in the table
-    # Alpha output unused and the image has alpha < 1: Cycles' colour is premultiplied.
+    # Alpha output unused and the image has alpha < 1: Cycles' colour is associated, read
+    # from the image's second (associated-alpha) row.
     base = _node(program, program["outputs"]["base_color"])
-    assert base["type"] == "VECT_MATH" and base["params"]["operation"] == "SCALE"
-    assert base["inputs"]["Scale"]["socket"] == "Alpha"
+    assert base["type"] == "TEX_IMAGE" and base["params"]["texture"] == 1
+    assert textures.names == ["HDR", "HDR (associated alpha)"]
+    assert np.allclose(textures.images[1][0, 1], (0.2, 0.1, 0.05, 0.5))
+    assert np.allclose(textures.images[1][0, 0], px[0, 0])
     # With the Alpha output used, the colour is straight.
     mix = nt.nodes.new("ShaderNodeMixShader")
     transparent = nt.nodes.new("ShaderNodeBsdfTransparent")
@@ -166,10 +169,32 @@ def test_float_image_untouched_and_premultiplied_alpha_undone():
     nt.links.new(diffuse.outputs[0], mix.inputs[2])
     nt.links.new(mix.outputs[0], out.inputs["Surface"])
     compiled, program, _ = _compile(mat)
-    assert _node(program, program["outputs"]["base_color"])["type"] == "TEX_IMAGE"
+    base = _node(program, program["outputs"]["base_color"])
+    assert base["type"] == "TEX_IMAGE" and base["params"]["texture"] == 0   # straight row
     alpha = _node(program, program["outputs"]["alpha"])   # mix(f, 0, 1) = f = the image alpha
     assert program["outputs"]["alpha"] == {"node": program["outputs"]["base_color"]["node"],
                                            "socket": "Alpha"} or alpha["type"] == "MIX"
+
+
+def test_byte_srgb_alpha_associates_before_linearising():
+    """Measured with Cycles (bpy 5.0.1, emission, pixel 0.8 at alpha 0.5): Alpha output
+    unused → 0.1326 = EOTF(0.8·0.5); used → 0.596 ≈ EOTF(0.8) (straight)."""
+    mat, nt, emission = _material("Glow", "ShaderNodeEmission")
+    px = np.full((1, 1, 4), 0.5, np.float32)
+    px[..., :3] = 204 / 255
+    tex = _tex_node(nt, _image("Half", px, "sRGB"))
+    nt.links.new(tex.outputs["Color"], emission.inputs["Color"])
+    compiled, program, textures = _compile(mat)
+    c = 204 / 255
+    eotf = lambda x: ((x + 0.055) / 1.055) ** 2.4  # noqa: E731
+    assert np.allclose(textures.images[0][0, 0, :3], eotf(c), rtol=1e-6)          # straight
+    assert np.allclose(textures.images[1][0, 0, :3], eotf(c * 128 / 255), rtol=1e-5)  # associated
+    assert _node(program, program["outputs"]["emission"])["params"]["texture"] == 1
+    assert compiled.constants["emission"] == pytest.approx([eotf(c * 128 / 255)] * 3, rel=1e-5)
+    # Non-Color images are never associated
+    tex.image = _image("HalfData", px, "Non-Color")  # (changing the space regenerates an image)
+    compiled, program, textures = _compile(mat)
+    assert len(textures.names) == 1 and np.allclose(textures.images[0][0, 0, :3], c)
 
 
 def test_missing_image_is_magenta_with_one_warning():

@@ -11,6 +11,8 @@ like Cycles; objects without a material get Cycles' default grey diffuse.
 """
 from __future__ import annotations
 
+import dataclasses
+import json
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,6 +42,11 @@ class MaterialRow:
     uses_uvs: bool = False
     uses_tangents: bool = False
     uv_maps: frozenset = frozenset()
+
+    @property
+    def needs_object_matrix(self) -> bool:
+        """An object-space Normal Map: one row per object matrix (``MaterialCollector``)."""
+        return '"object_matrix":null' in self.program
 
     @property
     def is_emissive(self) -> bool:
@@ -144,12 +151,39 @@ class MaterialCollector:
         self.rows.append(material)
         return self._index[key]
 
-    def slot_table(self, obj) -> np.ndarray:
-        """int32 array mapping each material slot of ``obj`` to a row (at least one entry)."""
+    def slot_table(self, obj, world_from_object=None) -> np.ndarray:
+        """int32 array mapping each material slot of ``obj`` to a row (at least one entry).
+
+        Materials with an object-space Normal Map get one row per object matrix
+        (``world_from_object``, 4×4), their NORMAL_MAP ``object_matrix`` filled in.
+        """
         slots = [self.index_of(slot.material) for slot in obj.material_slots]
         if not slots:
             slots = [self.index_of(None)]
+        if world_from_object is not None:
+            slots = [self._object_variant(r, world_from_object) if self.rows[r].needs_object_matrix
+                     else r for r in slots]
         return np.asarray(slots, np.int32)
+
+    def _object_variant(self, row: int, world_from_object) -> int:
+        """The row of material ``row`` whose object-space normal maps use this object's
+        matrix: NORMAL_MAP ``object_matrix`` = the 3×3 linear part of the object's world
+        matrix (world_from_object, row-major; the core transforms normals with its inverse
+        transpose and normalises)."""
+        m3 = np.asarray(world_from_object, np.float64)[:3, :3]
+        key = ("OBJ", row, tuple(np.round(m3, 9).ravel()))
+        found = self._index.get(key)
+        if found is not None:
+            return found
+        base = self.rows[row]
+        program = json.loads(base.program)
+        for node in program["nodes"]:
+            if node["type"] == "NORMAL_MAP" and node["params"].get("space") == "OBJECT":
+                node["params"]["object_matrix"] = m3.tolist()
+        variant = dataclasses.replace(base, program=json.dumps(program, separators=(",", ":")))
+        self._index[key] = len(self.rows)
+        self.rows.append(variant)
+        return self._index[key]
 
     def table(self):
         from ercuts_core.description import MaterialTable

@@ -452,3 +452,102 @@ def test_ngon_tangents_fall_back_with_a_warning():
     local = read_mesh(ob.data, uvs=True, tangents=True)
     assert np.allclose(local.tangents[..., :3], (1, 0, 0), atol=1e-6)
     assert np.allclose(local.tangents[..., 3], 1.0)
+
+
+# --------------------------------------------------------------------------- value nodes
+
+def test_value_nodes_inputs_and_params():
+    mat, nt, diffuse = _material("Nodes")
+    coord = nt.nodes.new("ShaderNodeTexCoord")
+    mapping = nt.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Scale"].default_value = (2.0, 3.0, 1.0)
+    sep = nt.nodes.new("ShaderNodeSeparateXYZ")
+    math_node = nt.nodes.new("ShaderNodeMath")
+    math_node.operation = "POWER"
+    math_node.use_clamp = True
+    math_node.inputs[1].default_value = 2.0
+    ramp = nt.nodes.new("ShaderNodeValToRGB")
+    ramp.color_ramp.elements[1].color = (1.0, 0.5, 0.0, 1.0)
+    curves = nt.nodes.new("ShaderNodeRGBCurve")
+    legacy = nt.nodes.new("ShaderNodeMixRGB")
+    legacy.blend_type = "MULTIPLY"
+    legacy.inputs["Color2"].default_value = (0.5, 0.5, 0.5, 1.0)
+    nt.links.new(coord.outputs["UV"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], sep.inputs["Vector"])
+    nt.links.new(sep.outputs["X"], math_node.inputs[0])
+    nt.links.new(math_node.outputs["Value"], ramp.inputs["Fac"])
+    nt.links.new(ramp.outputs["Color"], curves.inputs["Color"])
+    nt.links.new(curves.outputs["Color"], legacy.inputs["Color1"])
+    nt.links.new(legacy.outputs["Color"], diffuse.inputs["Color"])
+    compiled, program, _ = _compile(mat)
+    assert compiled.notes == [] and compiled.uses_uvs
+    _assert_topological(program)
+    by_type = {n["type"]: n for n in program["nodes"]}
+    assert set(by_type) == {"UVMAP", "MAPPING", "SEPXYZ", "MATH", "VALTORGB", "CURVE_RGB", "MIX"}
+    assert by_type["MAPPING"]["params"] == {"vector_type": "POINT"}
+    assert by_type["MAPPING"]["inputs"]["Scale"] == [2.0, 3.0, 1.0]
+    assert by_type["MATH"]["params"] == {"operation": "POWER", "use_clamp": True}
+    assert by_type["MATH"]["inputs"]["Value_001"] == 2.0 and "Value_002" not in by_type["MATH"]["inputs"]
+    assert by_type["VALTORGB"]["params"]["positions"] == [0.0, 1.0]
+    assert by_type["VALTORGB"]["params"]["colors"][1] == [1.0, 0.5, 0.0, 1.0]
+    lut = np.array(by_type["CURVE_RGB"]["params"]["lut"])
+    assert lut.shape == (256, 4) and np.allclose(lut, np.linspace(0, 1, 256)[:, None], atol=1e-3)
+    mix = by_type["MIX"]
+    assert mix["params"]["blend_type"] == "MULTIPLY" and mix["params"]["data_type"] == "RGBA"
+    assert set(mix["inputs"]) == {"Factor", "A", "B"} and mix["inputs"]["B"] == [0.5, 0.5, 0.5]
+    assert program["outputs"]["base_color"] == {"node": len(program["nodes"]) - 1, "socket": "Result"}
+
+
+def test_light_path_and_add_shader():
+    mat, nt, add = _material("Glow", "ShaderNodeAddShader")
+    diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    emission = nt.nodes.new("ShaderNodeEmission")
+    path = nt.nodes.new("ShaderNodeLightPath")
+    nt.links.new(path.outputs["Is Camera Ray"], emission.inputs["Strength"])
+    nt.links.new(diffuse.outputs[0], add.inputs[0])
+    nt.links.new(emission.outputs[0], add.inputs[1])
+    compiled, program, _ = _compile(mat)
+    assert len(compiled.notes) == 1 and "Light Path" in compiled.notes[0]
+    emit = _node(program, program["outputs"]["emission"])
+    assert emit["type"] == "VECT_MATH" and emit["params"]["operation"] == "SCALE"
+    assert _node(program, emit["inputs"]["Scale"])["type"] == "LIGHT_PATH"
+    assert program["outputs"]["base_color"] == pytest.approx([0.8] * 3) and program["outputs"]["alpha"] == 1.0
+    assert program["outputs"]["roughness"] == 1.0        # the diffuse side's lobe
+
+
+def test_object_space_normal_map_gets_the_object_matrix():
+    mat, nt, diffuse = _material("ObjN")
+    nmap = nt.nodes.new("ShaderNodeNormalMap")
+    nmap.space = "OBJECT"
+    nt.links.new(_tex_node(nt, _image("N", _byte_pixels(), "Non-Color")).outputs["Color"],
+                 nmap.inputs["Color"])
+    nt.links.new(nmap.outputs["Normal"], diffuse.inputs["Normal"])
+    h.camera()
+    a = h.plane("A", material=mat)
+    b = h.plane("B", material=mat, location=(3, 0, 0))
+    b.rotation_euler = (0, 0, math.pi / 2)
+    desc = h.export().description
+    rows = {}
+    for oid, name in enumerate(desc.object_names):
+        rows[name] = int(desc.mesh.material_ids[desc.mesh.object_ids == oid][0])
+    assert rows["A"] != rows["B"]
+    for name, ob in (("A", a), ("B", b)):
+        program = json.loads(desc.materials.programs[rows[name]])
+        node = next(n for n in program["nodes"] if n["type"] == "NORMAL_MAP")
+        assert np.allclose(node["params"]["object_matrix"], np.array(ob.matrix_world)[:3, :3], atol=1e-6)
+
+
+def test_principled_ior_linked_specular_formula():
+    mat, nt, bsdf = _material("IOR", "ShaderNodeBsdfPrincipled")
+    value = nt.nodes.new("ShaderNodeMath")   # not foldable: a MATH node feeding the IOR
+    value.operation = "ADD"
+    value.inputs[0].default_value, value.inputs[1].default_value = 1.0, 0.5
+    nt.links.new(value.outputs[0], bsdf.inputs["IOR"])
+    nt.links.new(value.outputs[0], bsdf.inputs["Roughness"])
+    compiled, program, _ = _compile(mat)
+    spec = program["outputs"]["specular"]
+    if compat.PRINCIPLED_V4:   # ((ior−1)/(ior+1))²·25·level as MATH nodes
+        ops = [n["params"].get("operation") for n in program["nodes"]]
+        assert "DIVIDE" in ops and isinstance(spec, dict)
+    else:                      # 3.x: 'Specular' is the core's specular, IOR unused
+        assert spec == pytest.approx(0.5)

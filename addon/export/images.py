@@ -52,6 +52,18 @@ def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, lo, hi).astype(np.float32)
 
 
+#: The EOTF of every 8-bit code value: byte images hold exactly k/255, so a table lookup is
+#: exact (and ~20× faster than the power function on millions of texels).
+_SRGB_LUT = srgb_to_linear(np.arange(256, dtype=np.float32) / np.float32(255.0))
+
+
+def srgb_bytes_to_linear(c: np.ndarray) -> np.ndarray:
+    """The sRGB EOTF of 8-bit values given as floats k/255 (rounded to the nearest code,
+    as Cycles' byte textures are)."""
+    codes = np.clip(np.rint(np.asarray(c, np.float32) * np.float32(255.0)), 0, 255).astype(np.uint8)
+    return _SRGB_LUT[codes]
+
+
 @dataclass
 class TextureInfo:
     """What the shader compiler needs to know about a texture row."""
@@ -85,7 +97,7 @@ def read_image(image) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
         return None, None, notes
     px = buf.reshape(h, w, channels)
     if channels == 4:
-        rgba = px.copy()
+        rgba = px  # a fresh buffer: modified in place
     else:
         rgba = np.ones((h, w, 4), np.float32)
         if channels == 1:
@@ -95,11 +107,11 @@ def read_image(image) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
             rgba[..., 3] = px[..., 1]
         else:
             rgba[..., :3] = px[..., :3]
-    if not np.isfinite(rgba).all():
+    is_float = bool(getattr(image, "is_float", False))
+    if is_float and not np.isfinite(rgba).all():  # byte images cannot hold NaN
         notes.append("non-finite pixels replaced by 0")
         rgba = np.nan_to_num(rgba, nan=0.0, posinf=0.0, neginf=0.0)
     mode = getattr(image, "alpha_mode", "STRAIGHT")
-    is_float = bool(getattr(image, "is_float", False))
     if mode == "NONE":
         rgba[..., 3] = 1.0
     elif is_float and mode != "CHANNEL_PACKED":
@@ -114,10 +126,10 @@ def read_image(image) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
     if not data and mode not in {"CHANNEL_PACKED", "NONE"} and (rgba[..., 3] < 1.0).any():
         associated = rgba.copy()
         associated[..., :3] *= rgba[..., 3:4]
-        if srgb:
-            associated[..., :3] = srgb_to_linear(associated[..., :3])
+        if srgb:  # Cycles premultiplies the 8-bit values, then linearises
+            associated[..., :3] = srgb_bytes_to_linear(associated[..., :3])
     if srgb:
-        rgba[..., :3] = srgb_to_linear(rgba[..., :3])
+        rgba[..., :3] = srgb_bytes_to_linear(rgba[..., :3])
     elif not is_float and not (data or _is_linear_space(space)):
         notes.append(f"colour space '{space}' not converted (read as linear)")
     if associated is not None and not srgb:
@@ -159,8 +171,10 @@ class TextureCollector:
         return rows[0], self.infos[rows[0]]
 
     def _add(self, name: str, pixels: np.ndarray) -> int:
-        info = TextureInfo(mean_color=tuple(float(x) for x in pixels[..., :3].reshape(-1, 3).mean(axis=0)),
-                           mean_alpha=float(pixels[..., 3].mean()))
+        flat = pixels.reshape(-1, 4)
+        sample = flat[::max(1, len(flat) // 65536)]  # an estimate: ≤ 64 Ki texels suffice
+        mean = sample.mean(axis=0, dtype=np.float64)
+        info = TextureInfo(mean_color=tuple(float(x) for x in mean[:3]), mean_alpha=float(mean[3]))
         self.names.append(name)
         self.images.append(pixels)
         self.infos.append(info)

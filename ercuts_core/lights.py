@@ -124,13 +124,18 @@ class LightSet:
         desc: the scene.
         tri_p: (T, 3, 3) float64 triangle vertices (the built scene's geometry).
         tri_ng: (T, 3) unit geometric normals; tri_area: (T,) areas [m²].
+        tri_emission: (T, 3) per-triangle radiance overriding the materials' constants
+            (textured emission, :meth:`ercuts_core.shading.materials.SceneShading.triangle_emission`).
     """
 
-    def __init__(self, desc: SceneDescription, tri_p: NDArray, tri_ng: NDArray, tri_area: NDArray):
+    def __init__(self, desc: SceneDescription, tri_p: NDArray, tri_ng: NDArray, tri_area: NDArray,
+                 tri_emission: NDArray | None = None):
         self._init_bounds(tri_p)
         pl, sl, al = desc.point_lights, desc.sun_lights, desc.area_lights
         em = desc.materials.emission[desc.mesh.material_ids].astype(np.float64) \
             if desc.mesh.n_triangles else np.zeros((0, 3))
+        if tri_emission is not None:
+            em = np.asarray(tri_emission, np.float64)
         self.emissive_tris = np.flatnonzero(luminance(em) > 0)
         # Per-kind tables (float64).
         self.pt_pos = pl.position.astype(np.float64)

@@ -12,9 +12,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .arrays import take_rows
+from .bsdf import Bsdf, bsdf_max_value
 from .camera import Camera
 from .description import SceneDescription
 from .lights import LightSet
+from .shading.materials import SceneShading
 from .tracer import Hit, Tracer
 from .vecmath import dot
 
@@ -29,7 +31,9 @@ class Surface:
         ng: (N, 3) unit geometric normal (triangle winding; not flipped toward the ray).
         ns: (N, 3) unit shading normal, in the same hemisphere as ``ng``.
         prim: (N,) triangle index (−1 on misses).
-        mat: (N,) material row.
+        mat: (N,) shading key: the material row, or for materials whose program changes the
+            BSDF, M + prim (:mod:`ercuts_core.shading.materials`); build BSDFs with
+            :meth:`BuiltScene.bsdf`.
         t: (N,) distance along the ray.
     """
 
@@ -66,7 +70,12 @@ class BuiltScene:
         if self.has_normals:
             self.tri_vn = mesh.normals.astype(np.float64)[mesh.triangles]                # (T, 3, 3)
             self.tri_smooth = np.ones(mesh.n_triangles, bool) if mesh.smooth is None else mesh.smooth
-        self.lights = LightSet(desc, self.tri_p, self.tri_ng, self.tri_area)
+        # Shading programs (issue 14): inactive — and never consulted — without programs
+        self.shading = SceneShading(desc, self.tri_p, self.tri_mat)
+        self.textured = self.shading.active
+        tri_emission = self.shading.triangle_emission(desc.materials.emission, self.tri_ng) \
+            if self.textured else None
+        self.lights = LightSet(desc, self.tri_p, self.tri_ng, self.tri_area, tri_emission)
         self.camera = Camera(desc.camera)
         self.scene_radius = self.lights.radius
 
@@ -95,7 +104,37 @@ class BuiltScene:
             flip = dot(interp, ng) < 0
             interp[flip] *= -1.0
             ns = np.where(use[:, None], interp, ng)
-        return Surface(valid, p, ng, ns, hit.prim, take_rows(self.tri_mat, prim), hit.t)
+        mat = take_rows(self.tri_mat, prim)
+        if self.textured:
+            ns = self.shading.shading_normals(valid, prim, b, mat, ng, ns)
+            mat = self.shading.keys(valid, prim, mat)
+        return Surface(valid, p, ng, ns, hit.prim, mat, hit.t)
+
+    def bsdf(self, mat: NDArray, ns: NDArray, ng: NDArray, p: NDArray) -> Bsdf:
+        """The BSDF at N vertices from their shading keys ``mat`` (see :class:`Surface`),
+        positions p and normals (N, 3). Without programs: ``Bsdf.from_table`` exactly."""
+        if not self.textured:
+            return Bsdf.from_table(self.materials, mat, ns, ng)
+        prm = self.shading.bsdf_params(mat, p, ns, ng)
+        return Bsdf.from_params(prm["base_color"], prm["roughness"], prm["metallic"], prm["specular"], ns, ng)
+
+    def bsdf_max_value(self, mat: NDArray, p: NDArray) -> NDArray:
+        """(N, 3) :func:`ercuts_core.bsdf.bsdf_max_value` at shading keys ``mat`` and positions p."""
+        if not self.textured:
+            return bsdf_max_value(self.materials, mat)
+        up = np.tile([0.0, 0.0, 1.0], (len(mat), 1))
+        prm = self.shading.bsdf_params(mat, p, up, up)
+        table = self.materials.__class__(
+            ("",) * len(mat), prm["base_color"], prm["roughness"], prm["metallic"], prm["specular"],
+            np.zeros((len(mat), 3)))
+        return bsdf_max_value(table, np.arange(len(mat)))
+
+    def roughness(self, mat: NDArray, p: NDArray) -> NDArray:
+        """(N,) Principled roughness at shading keys ``mat`` and positions p."""
+        if not self.textured:
+            return np.asarray(self.materials.roughness)[mat]
+        up = np.tile([0.0, 0.0, 1.0], (len(mat), 1))
+        return self.shading.bsdf_params(mat, p, up, up)["roughness"]
 
     def emission(self, surf: Surface) -> NDArray:
         """(N, 3) radiance emitted by the hit triangles (two-sided; 0 for misses)."""

@@ -18,6 +18,7 @@ import numpy as np
 
 from .description import AreaLights, MaterialTable, MeshTable, PointLights, SceneDescription, SunLights
 from .sampling import luminance
+from .shading.program import compile_program
 from .shading.textures import TextureTable, missing_image
 
 
@@ -162,7 +163,23 @@ def _clean_corner_attribute(desc: SceneDescription, values, name: str, width: in
     return values
 
 
-def _clean_materials(mats: MaterialTable, issues: list[Issue]) -> MaterialTable:
+def _check_programs(mats: MaterialTable, programs: tuple[str, ...], n_textures: int,
+                    issues: list[Issue]) -> tuple[str, ...]:
+    """One warning per problem of a shading program (naming material and node); an unusable
+    program is dropped (the material renders with its constants)."""
+    if not any(programs):
+        return programs
+    out = list(programs)
+    for row, (text, name) in enumerate(zip(programs, mats.names)):
+        program, messages = compile_program(text, name, n_textures)
+        for msg in messages:
+            issues.append(Issue("warning", "shading_program", msg))
+        if program is None:
+            out[row] = ""
+    return tuple(out)
+
+
+def _clean_materials(mats: MaterialTable, issues: list[Issue], n_textures: int = 0) -> MaterialTable:
     """Clip to valid ranges, replace NaN with defaults, append the grey fallback row.
 
     Non-finite values are a warning per material (NaN → the default, an infinite emission
@@ -181,6 +198,7 @@ def _clean_materials(mats: MaterialTable, issues: list[Issue]) -> MaterialTable:
                             f"{len(programs)} shading programs for {mats.n_materials} materials: "
                             "programs ignored (constant materials)"))
         programs = ("",) * mats.n_materials
+    programs = _check_programs(mats, programs, n_textures, issues)
     return MaterialTable(
         mats.names + ("Ercuts fallback grey",),
         np.vstack([fix(mats.base_color, 0, 1, 0.8), [[0.8, 0.8, 0.8]]]),
@@ -275,7 +293,7 @@ def sanitize(desc: SceneDescription) -> Validated:
     stats: dict[str, int] = {}
     _check_camera(desc)
     mesh = _clean_mesh(desc, issues, stats)
-    mats = _clean_materials(desc.materials, issues)
+    mats = _clean_materials(desc.materials, issues, len(desc.textures))
     pl, sl, al = _clean_lights(desc, issues, stats)
     world = np.clip(np.nan_to_num(desc.world_radiance, nan=0.0, posinf=0.0), 0, None)
     if not np.isfinite(desc.world_radiance).all():

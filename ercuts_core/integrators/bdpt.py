@@ -427,7 +427,7 @@ class BDPTIntegrator(Integrator):
             last = k == n_vertices - 1
             if last and not (film is not None and k == 1):
                 break
-            bsdf = Bsdf.from_table(scene.materials, surf.mat, ns, ng)
+            bsdf = scene.bsdf(surf.mat, ns, ng, p)
             if film is not None and k == 1:
                 self.record_first_hit(film, pix, keep, surf, bsdf)
             if last:
@@ -589,7 +589,7 @@ class BDPTIntegrator(Integrator):
         k = t - 1
         p, ng, ns, wo = pt.p, pt.ng, pt.ns, pt.wo
         wi, dist, n_l, lp = ls.wi[idx], ls.dist[idx], ls.n[idx], ls.p[idx]
-        bsdf = Bsdf.from_table(self.scene.materials, cam.at("mat", k, lane), ns, ng)
+        bsdf = self.scene.bsdf(cam.at("mat", k, lane), ns, ng, p)
         f, pdf_fwd = _eval_pdf(bsdf, wo, wi)
         c = pt.beta * f * ls.Li[idx] * (np.abs(dot(ns, wi)) / ls.pdf_w[idx])[:, None]
         keep = np.flatnonzero(c.max(axis=1) > 0)
@@ -647,9 +647,8 @@ class BDPTIntegrator(Integrator):
         qp, qng, qns, qwo = qs.p, qs.ng, qs.ns, qs.wo
         pp, png, pns, pwo = pt.p, pt.ng, pt.ns, pt.wo
         w = v / np.sqrt(d2)[:, None]                              # light vertex → camera vertex
-        mats = self.scene.materials
-        bq = Bsdf.from_table(mats, lig.at("mat", kq, lane), qns, qng)
-        bp = Bsdf.from_table(mats, cam.at("mat", kp, lane), pns, png)
+        bq = self.scene.bsdf(lig.at("mat", kq, lane), qns, qng, qp)
+        bp = self.scene.bsdf(cam.at("mat", kp, lane), pns, png, pp)
         fq, pdf_q = _eval_pdf(bq, qwo, w)                 # pdf_q: qs → pt
         fp, pdf_p = _eval_pdf(bp, pwo, -w)                # pdf_p: pt → qs
         if self.shading_normals:
@@ -685,7 +684,7 @@ class BDPTIntegrator(Integrator):
         p, ng, ns, wo = qs.p, qs.ng, qs.ns, qs.wo
         wi, factor = conn.wi[idx], conn.factor[idx]
         raster, dist = conn.raster[idx], conn.dist[idx]
-        bsdf = Bsdf.from_table(self.scene.materials, lig.at("mat", k, lane), ns, ng)
+        bsdf = self.scene.bsdf(lig.at("mat", k, lane), ns, ng, p)
         # One evaluation toward the light vertex's predecessor gives f (the BSDF is
         # reciprocal, f(wi, wo) = f(wo, wi)) and the reverse density for MIS.
         f, pdf_rev = _eval_pdf(bsdf, wi, wo)

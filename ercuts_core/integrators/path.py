@@ -72,7 +72,7 @@ class PathIntegrator(Integrator):
             keep = np.flatnonzero(hit)
             surf, d, beta, idx = surf.subset(keep), d[keep], beta[keep], idx[keep]
             wo = -d
-            bsdf = Bsdf.from_table(scene.materials, surf.mat, surf.ns, surf.ng)
+            bsdf = scene.bsdf(surf.mat, surf.ns, surf.ng, surf.p)
             if depth == 0:
                 self.record_first_hit(film, pix, keep, surf, bsdf)
             if len(idx) == 0:

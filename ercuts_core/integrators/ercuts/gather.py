@@ -15,7 +15,6 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ...bsdf import Bsdf, bsdf_max_value
 from ...scene import BuiltScene
 from ...settings import RenderSettings
 from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
@@ -98,7 +97,7 @@ class Gather:
         # of the mean pixel luminance, Weber's law no longer applies (dark pixels would refine
         # to max_cut_size for errors nobody can see).
         floor = s.max_error * ABS_FLOOR * stats.get("P", 0.0) / max(window.n_pixels, 1)
-        f_bound = bsdf_max_value(scene.materials, g.mat)
+        f_bound = scene.bsdf_max_value(g.mat, g.p)
         clamp = 0.0 if not np.isfinite(gmax) else gmax
         share = emitter_share(tree, vpls) if tree is not None else None
         rays = 0
@@ -158,12 +157,12 @@ class Gather:
 
     def _glossy(self) -> NDArray:
         """(Q,) shading points with a specular lobe of roughness < :data:`GLOSSY_ROUGHNESS`."""
-        g, table = self.g, self.scene.materials
+        g, scene = self.g, self.scene
         h = np.flatnonzero(g.valid)
         out = np.zeros(len(g.pixel), bool)
         if len(h):
-            bsdf = Bsdf.from_table(table, g.mat[h], g.ns[h], g.ng[h])
-            out[h] = ~bsdf.is_diffuse & (np.asarray(table.roughness)[g.mat[h]] < GLOSSY_ROUGHNESS)
+            bsdf = scene.bsdf(g.mat[h], g.ns[h], g.ng[h], g.p[h])
+            out[h] = ~bsdf.is_diffuse & (scene.roughness(g.mat[h], g.p[h]) < GLOSSY_ROUGHNESS)
         return out
 
     def _shading_points(self, idx: NDArray, f_bound: NDArray) -> ShadingPoints:
@@ -171,7 +170,7 @@ class Gather:
         callbacks; ``f_bound`` (Q,) the materials' bound, used at diffuse points; glossy
         points get :class:`.lightcuts.GlossyReceivers`)."""
         scene, g = self.scene, self.g
-        bsdf = Bsdf.from_table(scene.materials, g.mat[idx], g.ns[idx], g.ng[idx])
+        bsdf = scene.bsdf(g.mat[idx], g.ns[idx], g.ng[idx], g.p[idx])
         wo, ng = g.wo[idx], g.ng[idx]
         p = g.p[idx]
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ...bsdf import Bsdf
 from ...lights import AREA, ENV, POINT, SUN, TRI
 from ...sampling import luminance, power_heuristic
 from ...scene import BuiltScene
@@ -72,7 +71,7 @@ def seeds_from_path_tracer(scene: BuiltScene, max_depth: int, rng: np.random.Gen
         base.p[lanes, depth], base.ng[lanes, depth] = surf.p, surf.ng
         base.ns[lanes, depth], base.mat[lanes, depth] = surf.ns, surf.mat
         wo = -d
-        bsdf = Bsdf.from_table(scene.materials, surf.mat, surf.ns, surf.ng)
+        bsdf = scene.bsdf(surf.mat, surf.ns, surf.ng, surf.p)
         _nee_seeds(scene, base, lanes, surf, wo, bsdf, beta, depth, rng, out_paths, out_e)
         bs = bsdf.sample(wo, rng.random((len(lanes), 3)))
         beta = beta * bs.weight

@@ -72,7 +72,6 @@ from contextlib import contextmanager
 import numpy as np
 from numpy.typing import NDArray
 
-from ...bsdf import Bsdf
 from ...film import Film
 from ...lights import ENV, POINT, SUN
 from ...memory import MemoryPlan, plan
@@ -363,7 +362,7 @@ class ErcutsIntegrator:
         nonvpl = np.isin(lights.kind, [POINT, SUN, ENV])
         if nonvpl.any() and hit.any():
             h = np.flatnonzero(hit)
-            bsdf = Bsdf.from_table(scene.materials, g.mat[h], g.ns[h], g.ng[h])
+            bsdf = scene.bsdf(g.mat[h], g.ns[h], g.ng[h], g.p[h])
             acc = np.zeros((len(h), 3))
             for _ in range(n_light_samples):
                 ls = lights.illuminate(g.p[h], rng.random(len(h)), rng.random((len(h), 2)))
@@ -437,7 +436,7 @@ class ErcutsIntegrator:
         depth = np.where(g.valid, g.surf.t, 1e10)[:, None]
         albedo = np.zeros((len(g.pixel), 3))
         if len(h):
-            albedo[h] = Bsdf.from_table(self.scene.materials, g.mat[h], g.ns[h], g.ng[h]).albedo()
+            albedo[h] = self.scene.bsdf(g.mat[h], g.ns[h], g.ng[h], g.p[h]).albedo()
         film.aov_sum["depth"] = per_pixel(depth, n, S)
         film.aov_sum["normal"] = per_pixel(np.where(g.valid[:, None], g.ns, 0.0), n, S)
         film.aov_sum["albedo"] = per_pixel(albedo, n, S)

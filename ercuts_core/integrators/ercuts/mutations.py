@@ -30,7 +30,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...arrays import take_rows
-from ...bsdf import Bsdf
 from ...lights import AREA, ENV, SUN, TRI
 from ...sampling import coordinate_system
 from ...scene import BuiltScene
@@ -187,7 +186,7 @@ def _walk_pdf(scene: BuiltScene, paths: PathBatch, rows: NDArray, j: NDArray) ->
     prev2, prev, cur = (slot_rows(paths.p, rows, j - k) for k in (2, 1, 0))
     wo, _ = normalize(prev2 - prev)
     wi, dist = normalize(cur - prev)
-    bsdf = Bsdf.from_table(scene.materials, *(slot_rows(a, rows, j - 1) for a in (paths.mat, paths.ns, paths.ng)))
+    bsdf = scene.bsdf(*(slot_rows(a, rows, j - 1) for a in (paths.mat, paths.ns, paths.ng, paths.p)))
     return bsdf.pdf(wo, wi) * np.abs(dot(slot_rows(paths.ng, rows, j), wi)) / np.maximum(dist * dist, 1e-300)
 
 
@@ -240,8 +239,8 @@ def bidirectional_mutation(ctx: MutationContext, x: PathBatch, rng: np.random.Ge
         if not act.any():
             break
         r = np.flatnonzero(act)
-        mat, ns, ng = (slot_rows(a, r, j - 1) for a in (y.mat, y.ns, y.ng))
-        bsdf = Bsdf.from_table(scene.materials, mat, ns, ng)
+        mat, ns, ng, pj = (slot_rows(a, r, j - 1) for a in (y.mat, y.ns, y.ng, y.p))
+        bsdf = scene.bsdf(mat, ns, ng, pj)
         bs = bsdf.sample(take_rows(cur_wo, r), rng.random((len(r), 3)))
         o = scene.tracer.offset(slot_rows(y.p, r, j - 1), ng, bs.wi)
         surf = scene.intersect(o, bs.wi)

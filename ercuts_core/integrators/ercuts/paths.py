@@ -27,7 +27,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...arrays import take_rows
-from ...bsdf import Bsdf
 from ...lights import AREA, ENV, POINT, SUN, TRI
 from ...scene import BuiltScene
 from ...vecmath import dot
@@ -151,7 +150,7 @@ def contribution(scene: BuiltScene, paths: PathBatch, infinite_dir: NDArray | No
         d = np.where(inf_edge[:, None], nxt, nxt - xi)
         dist = np.sqrt(dot(d, d))
         wi = d / np.maximum(dist, 1e-300)[:, None]
-        bsdf = Bsdf.from_table(scene.materials, mi, nsi, ngi)
+        bsdf = scene.bsdf(mi, nsi, ngi, xi)
         fr = bsdf.eval(wo, wi) * np.abs(dot(nsi, wi))[:, None]
         # Conversion at the next vertex: area (surfaces), 1/d² (point), 1 (infinite).
         k_next = kind[r]

@@ -28,7 +28,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...arrays import take_rows
-from ...bsdf import Bsdf
 from ...camera import Window
 from ...sampling import luminance
 from ...scene import BuiltScene, Surface
@@ -106,7 +105,7 @@ def vpl_radiance(scene: BuiltScene, g: GBuffer, pts: NDArray, pos: NDArray, norm
     cos_v = np.maximum(-dot(normal, wi), 0.0)
     geo = cos_v / np.maximum(dist2, 1e-300)
     geo_c = np.minimum(geo, gmax)
-    bsdf = Bsdf.from_table(scene.materials, g.mat[pts], g.ns[pts], g.ng[pts])
+    bsdf = scene.bsdf(g.mat[pts], g.ns[pts], g.ng[pts], g.p[pts])
     m = bsdf.eval(g.wo[pts], wi) * np.abs(dot(g.ns[pts], wi))[:, None]
     L = m * (geo_c[:, None] * intensity)
     test = g.valid[pts] & (L.max(axis=1) > 0)
@@ -234,7 +233,7 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
                 sg = np.where(flip, -1.0, 1.0)[:, None]
                 ng, ns = yk.ng * sg, yk.ns * sg
                 win = -w[h[k]]
-                bsdf = Bsdf.from_table(scene.materials, yk.mat, ns, ng)
+                bsdf = scene.bsdf(yk.mat, ns, ng, yk.p)
                 fr = luminance(bsdf.eval(wcam, win) * color[vv[h[k]]])
                 cos_g_in = np.abs(dot(ng, win))
                 ratio = np.abs(dot(ns, win)) / np.maximum(cos_g_in, 1e-12)

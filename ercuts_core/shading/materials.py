@@ -1,0 +1,159 @@
+"""Per-hit material parameters for the integrators: the scene's compiled programs, evaluated
+material by material over the hits (no per-hit Python loops).
+
+Shading keys (how path vertices carry textured materials). Every integrator stores a
+``mat`` integer per surface vertex next to its position p, ns and ng. :class:`SceneShading`
+makes that integer a *shading key*:
+
+* key < M (M = material rows): an untextured hit of material row ``key`` (unchanged: scenes
+  without programs render bit-identically and never reach this module's evaluation);
+* key ≥ M: a hit on triangle ``key − M`` whose material has a program. The parameters are
+  re-evaluated from (triangle, p): barycentrics are recovered by projecting p on the
+  triangle (:meth:`~ercuts_core.shading.geometry.MeshShading.barycentrics`), then UV etc.
+
+The normal output (normal map / bump) is applied once, when the hit is made
+(:meth:`SceneShading.shading_normals`), and travels in the vertex's ``ns``; the BSDF
+parameters are re-evaluated whenever a BSDF is built (:meth:`SceneShading.bsdf_params`).
+
+Emission programs: a triangle's emission is the mean of its program's emission over
+``EMISSION_SAMPLES`` stratified points (a per-triangle constant, the same for light
+sampling, hits and light tracing, so every integrator stays unbiased for that scene; a
+documented approximation of textured emitters finer than the triangles).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .geometry import MeshShading
+from .program import BSDF_OUTPUTS, compile_program
+
+#: Points per triangle (a 4×4 stratified barycentric grid) for textured emission.
+EMISSION_SAMPLES = 4
+
+
+def _compile_all(materials, n_textures: int) -> list:
+    return [compile_program(text, name, n_textures)[0]
+            for text, name in zip(materials.programs, materials.names)]
+
+
+def program_messages(materials, n_textures: int) -> list[tuple[int, str]]:
+    """(material row, message) for every problem of every program (for validation)."""
+    out = []
+    for row, (text, name) in enumerate(zip(materials.programs, materials.names)):
+        for msg in compile_program(text, name, n_textures)[1]:
+            out.append((row, msg))
+    return out
+
+
+class SceneShading:
+    """The compiled programs of a built scene.
+
+    Args:
+        desc: the clean scene description.
+        tri_p: (T, 3, 3) float64 triangle corners; tri_mat: (T,) material rows.
+    """
+
+    def __init__(self, desc, tri_p: NDArray, tri_mat: NDArray):
+        mats = desc.materials
+        self.n_rows = mats.n_materials
+        self.programs = _compile_all(mats, len(desc.textures)) if mats.has_programs else [None] * self.n_rows
+        self.active = any(p is not None for p in self.programs)
+        self.tri_mat = tri_mat
+        self.row_program = np.array([p is not None for p in self.programs], bool)
+        self.row_normal = np.array([p is not None and p.has("normal") for p in self.programs], bool)
+        self.row_bsdf = np.array([p is not None and any(p.has(o) for o in BSDF_OUTPUTS)
+                                  for p in self.programs], bool)
+        self.row_emission = np.array([p is not None and p.has("emission") for p in self.programs], bool)
+        if self.active:
+            m = desc.mesh
+            self.mesh = MeshShading(tri_p, m.uvs, m.tangents, m.object_ids, desc.textures)
+            self.table = {"base_color": mats.base_color.astype(np.float64),
+                          "roughness": mats.roughness.astype(np.float64),
+                          "metallic": mats.metallic.astype(np.float64),
+                          "specular": mats.specular.astype(np.float64)}
+
+    # -- keys ------------------------------------------------------------------------
+
+    def keys(self, valid: NDArray, prim: NDArray, mat: NDArray) -> NDArray:
+        """(N,) shading keys of hits (module docstring): M + prim where the row's program
+        changes the BSDF, else the material row."""
+        textured = valid & self.row_bsdf[mat]
+        return np.where(textured, self.n_rows + prim, mat)
+
+    def rows(self, key: NDArray) -> NDArray:
+        """(N,) material rows of shading keys."""
+        key = np.asarray(key, np.int64)
+        return np.where(key >= self.n_rows, self.tri_mat[np.maximum(key - self.n_rows, 0)], key)
+
+    # -- evaluation ------------------------------------------------------------------
+
+    def _by_material(self, rows: NDArray, sel: NDArray):
+        """Yield (material row, lane indices) for the lanes ``sel`` grouped by material."""
+        lanes = np.flatnonzero(sel)
+        if not len(lanes):
+            return
+        r = rows[lanes]
+        order = np.argsort(r, kind="stable")
+        r, lanes = r[order], lanes[order]
+        cuts = np.flatnonzero(np.diff(r)) + 1
+        for group in np.split(np.arange(len(lanes)), cuts):
+            yield int(r[group[0]]), lanes[group]
+
+    def shading_normals(self, valid: NDArray, prim: NDArray, b: NDArray, mat: NDArray,
+                        ng: NDArray, ns: NDArray) -> NDArray:
+        """(N, 3) shading normals after the programs' normal output (normal map, bump), put
+        on ng's side; lanes without a normal program keep ``ns``."""
+        sel = valid & self.row_normal[mat]
+        if not sel.any():
+            return ns
+        out = ns.copy()
+        for row, lanes in self._by_material(mat, sel):
+            ctx = self.mesh.context(prim[lanes], b[lanes], ng[lanes], ns[lanes])
+            n = self.programs[row].evaluate(ctx, ["normal"])["normal"]
+            flip = (n * ng[lanes]).sum(1) < 0
+            out[lanes] = np.where(flip[:, None], -n, n)
+        return out
+
+    def bsdf_params(self, key: NDArray, p: NDArray, ns: NDArray, ng: NDArray) -> dict[str, NDArray]:
+        """Principled parameters per lane: base_color (N, 3), roughness, metallic, specular (N,).
+
+        Constant rows are gathered from the table; textured keys are evaluated per material.
+        """
+        key = np.asarray(key, np.int64).reshape(-1)
+        rows = self.rows(key)
+        out = {k: v[rows] for k, v in self.table.items()}
+        textured = key >= self.n_rows
+        if not textured.any():
+            return out
+        prim = np.where(textured, key - self.n_rows, 0)
+        p, ns, ng = (np.asarray(a, np.float64).reshape(-1, 3) for a in (p, ns, ng))
+        for row, lanes in self._by_material(rows, textured):
+            b = self.mesh.barycentrics(prim[lanes], p[lanes])
+            ctx = self.mesh.context(prim[lanes], b, ng[lanes], ns[lanes])
+            for name, val in self.programs[row].evaluate(ctx, BSDF_OUTPUTS).items():
+                out[name][lanes] = val
+        return out
+
+    def triangle_emission(self, emission: NDArray, tri_ng: NDArray) -> NDArray:
+        """(T, 3) per-triangle emitted radiance: the rows' constants, and for rows with an
+        emission program the mean over a stratified grid of EMISSION_SAMPLES² points."""
+        em = emission[self.tri_mat].astype(np.float64)
+        tris = np.flatnonzero(self.row_emission[self.tri_mat]) if self.active else np.zeros(0, np.int64)
+        if not len(tris):
+            return em
+        k = EMISSION_SAMPLES
+        s, t = np.meshgrid((np.arange(k) + 0.5) / k, (np.arange(k) + 0.5) / k)
+        su = np.sqrt(s.ravel())                      # uniform on the triangle [Turk 1990]
+        grid = np.stack([1.0 - su, su * (1.0 - t.ravel()), su * t.ravel()], 1)   # (k², 3)
+        prim = np.repeat(tris, len(grid))
+        b = np.tile(grid, (len(tris), 1))
+        ng = tri_ng[prim]
+        for row, lanes in self._by_material(self.tri_mat[prim], np.ones(len(prim), bool)):
+            ctx = self.mesh.context(prim[lanes], b[lanes], ng[lanes], ng[lanes])
+            val = self.programs[row].evaluate(ctx, ["emission"])["emission"]
+            sums = np.zeros((len(em), 3))
+            np.add.at(sums, prim[lanes], val)
+            mine = np.unique(prim[lanes])
+            em[mine] = np.maximum(sums[mine] / len(grid), 0.0)
+        return em

@@ -1,13 +1,14 @@
 """Blender materials → rows of the core's ``MaterialTable``.
 
-Supported surface shaders, with socket names of both Blender 3.x and 4.x/5.x
-(``compat.principled_input``): Principled BSDF (base colour, roughness, metallic,
-specular, emission colour × strength), Diffuse BSDF and Emission. Inputs may be
-constant or linked to an RGB/Value node (through reroutes). Anything else (other
-shader nodes, textures, groups) gives *one* warning naming the material, and a
-fallback: the socket's own value for a linked input, grey diffuse for an unsupported
-shader. Materials without a node tree render their viewport colour as a diffuse,
-like Cycles; objects without a material get Cycles' default grey diffuse.
+Each material's node tree is compiled by :mod:`.shaders` into the row's constants plus a
+shading program (``MaterialTable.programs``; "" when the constants say everything, so
+scenes with constant materials export exactly as before issue 14). Images the programs
+read go to the scene's texture table (:mod:`.images`). Everything that cannot be
+translated gives *one* warning per material naming the nodes, and the documented fallback
+(the input's own value for an unsupported value node, grey diffuse for an unsupported
+shader). Materials without a node tree render their viewport colour as a diffuse, like
+Cycles; objects without a material get Cycles' default grey diffuse. Materials with an
+object-space Normal Map get one row per object matrix.
 """
 from __future__ import annotations
 

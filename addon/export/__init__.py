@@ -85,7 +85,7 @@ def _optional_fields(cls, **values) -> dict:
 
 
 def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
-                 require_camera=True, should_stop=None) -> ExportResult:
+                 require_camera=True, should_stop=None, texture_cache=None) -> ExportResult:
     """Export the evaluated scene of ``depsgraph`` (its view layer) for the core.
 
     Args:
@@ -94,6 +94,8 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         use_border: override ``render.use_border``.
         require_camera: raise :class:`ExportError` when there is no camera (else camera=None).
         should_stop: callable polled during the export; True raises :class:`ExportCancelled`.
+        texture_cache: a dict kept between exports (the viewport's): unchanged images are
+            not read again; it is replaced by this export's images.
     """
     from ercuts_core.description import MeshTable, SceneDescription
 
@@ -127,7 +129,7 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         camera = dataclasses.replace(camera, world_from_camera=shifted)
 
     # ---------------------------------------------------------------- objects
-    textures = TextureCollector()
+    textures = TextureCollector(cache=texture_cache)
     materials = MaterialCollector(override=getattr(view_layer, "material_override", None),
                                   textures=textures)
     lights = LightCollector()
@@ -222,6 +224,9 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
     radiance, world_warnings = world_radiance(world)
 
     texture_table = textures.table() if textures.names else None
+    if texture_cache is not None:
+        texture_cache.clear()
+        texture_cache.update(textures.cache_out)
     warnings += materials.warnings + textures.warnings + mesh_warnings + lights.warnings + world_warnings
     if scene.render.use_motion_blur:
         warnings.append("motion blur ignored")
@@ -243,5 +248,6 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
                    meshes=sum(v is not None for v in local_cache.values()),
                    lights=len(points) + len(suns) + len(areas), **skipped,
                    textures=len(textures.names), texture_bytes=textures.nbytes,
+                   texture_reads=textures.reads,
                    origin=tuple(float(x) for x in origin)),
     )

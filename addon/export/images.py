@@ -138,10 +138,48 @@ def read_image(image) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
             None if associated is None else np.ascontiguousarray(associated, np.float32), notes)
 
 
-class TextureCollector:
-    """The scene's texture table: one row per distinct Blender image."""
+def cache_key(image):
+    """What an image's pixels depend on, for re-use across exports (the viewport re-exports
+    on every edit); None when the image must be read again (unsaved edits — painting,
+    ``pixels`` set from Python — sequences, movies, tiles)."""
+    if image.is_dirty:
+        return None
+    source = image.source
+    if image.packed_file is not None:
+        origin = ("packed", image.packed_file.size)
+    elif source == "FILE":
+        import os
 
-    def __init__(self):
+        import bpy
+
+        path = bpy.path.abspath(image.filepath, library=image.library)
+        try:
+            st = os.stat(path)
+            origin = (path, st.st_mtime_ns, st.st_size)
+        except OSError:
+            origin = (path, None, None)
+    elif source == "GENERATED":
+        origin = (image.generated_type, tuple(image.generated_color), image.generated_width,
+                  image.generated_height, bool(image.use_generated_float))
+    else:
+        return None
+    return (image.original.name_full, source, tuple(image.size), image.colorspace_settings.name,
+            image.alpha_mode, bool(image.is_float), origin)
+
+
+class TextureCollector:
+    """The scene's texture table: one row per distinct Blender image.
+
+    ``cache``: an optional dict kept by the caller between exports (the viewport session):
+    images whose :func:`cache_key` is unchanged are not read again; after the export,
+    :attr:`cache_out` holds the entries of this export's images (the caller replaces its
+    cache with it, so the cache never outgrows one scene's textures).
+    """
+
+    def __init__(self, cache: dict | None = None):
+        self.cache = cache
+        self.cache_out: dict = {}
+        self.reads = 0
         self.names: list[str] = []
         self.images: list[np.ndarray] = []
         self.infos: list[TextureInfo] = []
@@ -155,7 +193,14 @@ class TextureCollector:
         key = image.original.name_full
         rows = self._index.get(key)
         if rows is None:
-            straight, assoc, notes = read_image(image)
+            ckey = cache_key(image) if self.cache is not None else None
+            cached = self.cache.get(ckey) if ckey is not None else None
+            if cached is None:
+                cached = read_image(image)
+                self.reads += 1
+            if ckey is not None:
+                self.cache_out[ckey] = cached
+            straight, assoc, notes = cached
             if straight is None:
                 self.warnings.append(f"Image '{image.name}' (material '{material_name}') is missing "
                                      f"or cannot be loaded: rendered magenta")

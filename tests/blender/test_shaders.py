@@ -607,3 +607,27 @@ def test_gltf_round_trip_compiles_without_warnings(tmp_path):
     assert _node(program, outputs["normal"])["type"] == "NORMAL_MAP"
     assert desc.mesh.uvs is not None and desc.mesh.tangents is not None
     assert len(desc.textures.names) == 3
+
+
+def test_texture_cache_reuses_unchanged_images(tmp_path):
+    """The viewport re-exports on every edit: with a cache, unchanged images are not read
+    again; a changed file is."""
+    path = tmp_path / "wall.png"
+    src = _image("Src", _byte_pixels(), "sRGB")
+    src.filepath_raw, src.file_format = str(path), "PNG"
+    src.save()
+    mat, nt, diffuse = _material("Wall")
+    img = bpy.data.images.load(str(path))
+    nt.links.new(_tex_node(nt, img).outputs["Color"], diffuse.inputs["Color"])
+    h.camera()
+    _uv_plane(material=mat)
+    cache: dict = {}
+    first = h.export(texture_cache=cache)
+    assert first.stats["texture_reads"] == 1 and len(cache) == 1
+    second = h.export(texture_cache=cache)
+    assert second.stats["texture_reads"] == 0
+    assert np.array_equal(first.description.textures.images[0], second.description.textures.images[0])
+    assert h.export().stats["texture_reads"] == 1              # no cache: always read
+    import os
+    os.utime(path, ns=(1, 1))                                  # the file changed
+    assert h.export(texture_cache=cache).stats["texture_reads"] == 1

@@ -415,8 +415,9 @@ class _Compiler:
             self.note(f"Image Texture '{node.name}': {node.projection.lower()} projection "
                       f"rendered as flat")
         interpolation = {"Smart": "Cubic"}.get(node.interpolation, node.interpolation)
-        if image is None:  # Cycles: an Image Texture without image is black (alpha 0? no: 0,0,0,1)
-            return (0.0, 0.0, 0.0) if psocket == "Color" else 0.0
+        if image is None:  # measured with Cycles 5.0.1: magenta, alpha 1
+            self.note(f"Image Texture '{node.name}' has no image: rendered magenta")
+            return (1.0, 0.0, 1.0) if psocket == "Color" else 1.0
         # Cycles: Color is associated (premultiplied) unless the Alpha output is used.
         associated = not _linked(node.outputs["Alpha"])
         if self.textures is None:

@@ -631,3 +631,15 @@ def test_texture_cache_reuses_unchanged_images(tmp_path):
     import os
     os.utime(path, ns=(1, 1))                                  # the file changed
     assert h.export(texture_cache=cache).stats["texture_reads"] == 1
+
+
+def test_image_texture_without_image_is_magenta():
+    """Measured with Cycles (bpy 5.0.1): an Image Texture with no image gives (1, 0, 1), alpha 1."""
+    mat, nt, emission = _material("Empty", "ShaderNodeEmission")
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.name = "No Image"
+    nt.links.new(tex.outputs["Color"], emission.inputs["Color"])
+    nt.links.new(tex.outputs["Alpha"], emission.inputs["Strength"])
+    compiled, program, _ = _compile(mat)
+    assert program is None and compiled.constants["emission"] == (1.0, 0.0, 1.0)
+    assert len(compiled.notes) == 1 and "'No Image'" in compiled.notes[0]

@@ -288,13 +288,16 @@ class _Compiler:
         if key in self._busy:
             self.note(f"node '{node.name}' is part of a link cycle, using the input's own value")
             return _convert_const(_default(socket), _socket_kind(socket), want)
-        if key not in self._memo:
+        result = self._memo.get(key)
+        if result is None:
             self._busy.add(key)
             try:
-                self._memo[key] = self._node_output(node, out, nctx, socket)
+                result = self._node_output(node, out, nctx, socket)
             finally:
                 self._busy.discard(key)
-        val, kind = self._memo[key]
+            if is_ref(result[0]) or node.type in {"RGB", "VALUE"}:
+                self._memo[key] = result   # fallbacks depend on the input socket: not memoised
+        val, kind = result
         return self.convert(val, kind, want)
 
     def convert(self, val, kind: str, want: str):
@@ -482,6 +485,13 @@ class _Compiler:
         if what == "const":  # nothing connected: no closure (black, opaque)
             return Closure(base_color=(0.0, 0.0, 0.0), specular=0.0)
         node, out, nctx = a, b, c
+        if _socket_kind(out) != "S":
+            # Cycles turns a value linked into a shader socket into an Emission: a float
+            # drives its strength (white), a colour/vector its colour (strength 1).
+            value = self.value(socket, ctx)
+            if _socket_kind(out) == "F":
+                return Closure(base_color=(0.0, 0.0, 0.0), emission=self.scale((1.0, 1.0, 1.0), value))
+            return Closure(base_color=(0.0, 0.0, 0.0), emission=self.convert(value, "C", "C"))
         key = ("S", tuple(g.as_pointer() for g in nctx), node.as_pointer())
         if key in self._busy or depth > 256:
             self.note(f"shader '{node.name}' is part of a link cycle, rendered as black")

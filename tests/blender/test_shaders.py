@@ -643,3 +643,25 @@ def test_image_texture_without_image_is_magenta():
     compiled, program, _ = _compile(mat)
     assert program is None and compiled.constants["emission"] == (1.0, 0.0, 1.0)
     assert len(compiled.notes) == 1 and "'No Image'" in compiled.notes[0]
+
+
+def test_value_into_shader_socket_is_an_emission_and_mix_node_rgba():
+    """Cycles turns a colour linked into a shader socket into an Emission (strength 1);
+    the 3.4+ Mix node in RGBA mode keeps its Factor/A/B names."""
+    mat, nt, _ = _material("Direct")
+    out = nt.nodes["Material Output"]
+    mix = nt.nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    mix.blend_type = "SCREEN"
+    coord = nt.nodes.new("ShaderNodeTexCoord")
+    nt.links.new(coord.outputs["UV"], mix.inputs["Factor"])
+    nt.links.new(mix.outputs[2], out.inputs["Surface"])   # Result (colour)
+    compiled, program, _ = _compile(mat)
+    assert compiled.notes == []
+    emission = _node(program, program["outputs"]["emission"])
+    assert emission["type"] == "MIX" and emission["params"]["data_type"] == "RGBA"
+    assert emission["params"]["blend_type"] == "SCREEN"
+    assert set(emission["inputs"]) == {"Factor", "A", "B"}
+    assert _node(program, emission["inputs"]["Factor"])["type"] == "VECT_MATH"   # vector → float
+    assert emission["inputs"]["A"] == pytest.approx([0.5, 0.5, 0.5])
+    assert program["outputs"]["base_color"] == [0.0, 0.0, 0.0]

@@ -167,11 +167,12 @@ def phase_parts(n_pixels: int, settings: RenderSettings, batch: int, seeds: int,
     return parts
 
 
-def plan(n_pixels: int, n_triangles: int, settings: RenderSettings) -> MemoryPlan:
+def plan(n_pixels: int, n_triangles: int, settings: RenderSettings, shading_bytes: int = 0) -> MemoryPlan:
     """Batch sizes that fit ``settings.memory_budget_mb``; raises :class:`MemoryBudgetError`.
 
     Args:
         n_pixels: pixels of the rendered window; n_triangles: triangles of the scene.
+        shading_bytes: textures and per-corner shading attributes (:func:`shading_bytes`).
     The largest batches are the ones the settings ask for (``batch_rays``; 2^18 E1 samples;
     2048 shading points); all batches shrink by the same factor (down to the minimums)
     until the estimate fits.
@@ -183,6 +184,8 @@ def plan(n_pixels: int, n_triangles: int, settings: RenderSettings) -> MemoryPla
     smallest = (min(MIN_BATCH_PIXELS, largest[0]), min(MIN_SEED_PIXELS, largest[1]), MIN_E1_CHUNK,
                 MIN_GATHER_BATCH)
     fixed = fixed_parts(n_pixels, n_triangles, s)
+    if shading_bytes:
+        fixed["textures"] = int(shading_bytes)
     budget = s.memory_budget_mb * MIB
 
     def make(scale: float) -> MemoryPlan:
@@ -210,7 +213,24 @@ def plan(n_pixels: int, n_triangles: int, settings: RenderSettings) -> MemoryPla
         f"border), reduce chains per pixel or max cut size, or raise the memory budget (0 = no limit)")
 
 
+#: Bytes per triangle of the built scene's shading tables when UVs / tangents are given
+#: (float64 copies of the per-corner attributes, the UV frame and the barycentric duals).
+UV_TRIANGLE_BYTES = 3 * 2 * 8 + 3 * 8 + 2 * 8 + 2 * 3 * 8 + 2 * 3 * 8
+TANGENT_TRIANGLE_BYTES = 3 * 4 * 8
+
+
+def shading_bytes(desc) -> int:
+    """Memory of a description's textures (float32, held once) and shading attributes."""
+    mesh = desc.mesh
+    total = desc.textures.nbytes
+    if mesh.uvs is not None:
+        total += mesh.uvs.nbytes + mesh.n_triangles * UV_TRIANGLE_BYTES
+    if mesh.tangents is not None:
+        total += mesh.tangents.nbytes + mesh.n_triangles * TANGENT_TRIANGLE_BYTES
+    return int(total)
+
+
 def plan_for(desc, settings: RenderSettings) -> MemoryPlan:
     """:func:`plan` for a (validated) :class:`~ercuts_core.description.SceneDescription`."""
     from .camera import render_window
-    return plan(render_window(desc.camera).n_pixels, desc.mesh.n_triangles, settings)
+    return plan(render_window(desc.camera).n_pixels, desc.mesh.n_triangles, settings, shading_bytes(desc))

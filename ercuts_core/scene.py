@@ -16,6 +16,7 @@ from .bsdf import Bsdf, bsdf_max_value
 from .camera import Camera
 from .description import SceneDescription
 from .lights import LightSet
+from .shading.alpha import AlphaTracer
 from .shading.materials import SceneShading
 from .tracer import Hit, Tracer
 from .vecmath import dot
@@ -71,11 +72,14 @@ class BuiltScene:
             self.tri_vn = mesh.normals.astype(np.float64)[mesh.triangles]                # (T, 3, 3)
             self.tri_smooth = np.ones(mesh.n_triangles, bool) if mesh.smooth is None else mesh.smooth
         # Shading programs (issue 14): inactive — and never consulted — without programs
-        self.shading = SceneShading(desc, self.tri_p, self.tri_mat)
+        self.shading = SceneShading(desc, self.tri_p, self.tri_mat, self.tri_ng)
         self.textured = self.shading.active
-        tri_emission = self.shading.triangle_emission(desc.materials.emission, self.tri_ng) \
+        tri_emission = self.shading.triangle_emission(desc.materials.emission) \
             if self.textured else None
         self.lights = LightSet(desc, self.tri_p, self.tri_ng, self.tri_area, tri_emission)
+        if self.textured and self.shading.row_alpha.any():
+            # Stochastic transparency for camera, bounce and shadow rays (alpha scenes only)
+            self.tracer = AlphaTracer(self.tracer, self.shading.alpha, self.shading.row_alpha[self.tri_mat])
         self.camera = Camera(desc.camera)
         self.scene_radius = self.lights.radius
 

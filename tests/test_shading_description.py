@@ -100,3 +100,14 @@ def test_nan_texels_and_empty_images_warn_and_fall_back():
     assert a[0, 1, 2] == 0 and a[1, 1, 0] == 0 and np.isfinite(a).all()
     np.testing.assert_array_equal(b, [[[1, 0, 1, 1]]])
     assert c.shape == (3, 2, 4) and (c[..., 3] == 1).all()
+
+
+def test_textures_count_in_the_memory_plan():
+    from ercuts_core import RenderSettings
+    from ercuts_core.memory import plan_for
+    d = cornell_box(24, 18)
+    big = _textured(d, images=(np.zeros((512, 512, 4), np.float32),))
+    plain, textured = plan_for(d, RenderSettings()), plan_for(big, RenderSettings())
+    assert "textures" not in plain.parts
+    assert textured.parts["textures"] >= 512 * 512 * 16
+    assert textured.total - plain.total == textured.parts["textures"]

@@ -51,20 +51,23 @@ class SceneShading:
 
     Args:
         desc: the clean scene description.
-        tri_p: (T, 3, 3) float64 triangle corners; tri_mat: (T,) material rows.
+        tri_p: (T, 3, 3) float64 triangle corners; tri_mat: (T,) material rows;
+        tri_ng: (T, 3) unit geometric normals.
     """
 
-    def __init__(self, desc, tri_p: NDArray, tri_mat: NDArray):
+    def __init__(self, desc, tri_p: NDArray, tri_mat: NDArray, tri_ng: NDArray):
         mats = desc.materials
         self.n_rows = mats.n_materials
         self.programs = _compile_all(mats, len(desc.textures)) if mats.has_programs else [None] * self.n_rows
         self.active = any(p is not None for p in self.programs)
         self.tri_mat = tri_mat
+        self.tri_ng = tri_ng
         self.row_program = np.array([p is not None for p in self.programs], bool)
         self.row_normal = np.array([p is not None and p.has("normal") for p in self.programs], bool)
         self.row_bsdf = np.array([p is not None and any(p.has(o) for o in BSDF_OUTPUTS)
                                   for p in self.programs], bool)
         self.row_emission = np.array([p is not None and p.has("emission") for p in self.programs], bool)
+        self.row_alpha = np.array([p is not None and p.has("alpha") for p in self.programs], bool)
         if self.active:
             m = desc.mesh
             self.mesh = MeshShading(tri_p, m.uvs, m.tangents, m.object_ids, desc.textures)
@@ -135,7 +138,18 @@ class SceneShading:
                 out[name][lanes] = val
         return out
 
-    def triangle_emission(self, emission: NDArray, tri_ng: NDArray) -> NDArray:
+    def alpha(self, prim: NDArray, b: NDArray) -> NDArray:
+        """(N,) alpha in [0, 1] of hits (prim, barycentrics b); 1 for rows without alpha."""
+        out = np.ones(len(prim))
+        rows = self.tri_mat[prim]
+        sel = self.row_alpha[rows]
+        for row, lanes in self._by_material(rows, sel):
+            ng = self.tri_ng[prim[lanes]]
+            ctx = self.mesh.context(prim[lanes], b[lanes], ng, ng)
+            out[lanes] = np.clip(self.programs[row].evaluate(ctx, ["alpha"])["alpha"], 0.0, 1.0)
+        return out
+
+    def triangle_emission(self, emission: NDArray) -> NDArray:
         """(T, 3) per-triangle emitted radiance: the rows' constants, and for rows with an
         emission program the mean over a stratified grid of EMISSION_SAMPLES² points."""
         em = emission[self.tri_mat].astype(np.float64)
@@ -148,7 +162,7 @@ class SceneShading:
         grid = np.stack([1.0 - su, su * (1.0 - t.ravel()), su * t.ravel()], 1)   # (k², 3)
         prim = np.repeat(tris, len(grid))
         b = np.tile(grid, (len(tris), 1))
-        ng = tri_ng[prim]
+        ng = self.tri_ng[prim]
         for row, lanes in self._by_material(self.tri_mat[prim], np.ones(len(prim), bool)):
             ctx = self.mesh.context(prim[lanes], b[lanes], ng[lanes], ng[lanes])
             val = self.programs[row].evaluate(ctx, ["emission"])["emission"]

@@ -155,8 +155,6 @@ def test_normal_mapped_rotated_plane_agrees_with_cycles(tmp_path, integrator):
     assert np.allclose(qe, qc, rtol=0.03, atol=3e-3)
 
 
-@pytest.mark.xfail(reason="the core does not evaluate the program's alpha output yet "
-                          "(stochastic transparency, issue 14)", strict=False)
 def test_alpha_cutout_agrees_with_cycles(tmp_path):
     """A plane cut out by its texture's alpha (Mix of Transparent and diffuse by Alpha) over a
     white floor, lit by a sun: the camera sees the floor through the holes, and the shadow."""

@@ -204,3 +204,45 @@ def test_bump_from_uv_height_agrees_with_cycles(tmp_path, distance):
     flat = 0.8 * 3.0 / np.pi * np.cos(np.radians(30))
     assert abs(qc.mean() / flat - 1) > 0.05                    # the bump is visible in Cycles
     assert np.allclose(qe, qc, rtol=0.03, atol=3e-3)
+
+
+def _checker(n=8, a=(0.9, 0.9, 0.9), b=(0.1, 0.3, 0.8)):
+    texels = np.ones((n, n, 4), np.float32)
+    ii, jj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    texels[..., :3] = np.where(((ii + jj) % 2 == 0)[..., None], a, b)
+    return texels
+
+
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
+def test_textured_room_with_indirect_light_agrees_with_cycles(tmp_path, integrator):
+    """The base scene of the light tests with a checker-textured floor (box-projected UVs from
+    Blender's own UV map) and an sRGB-textured box, lit by a point light, 4 bounces."""
+    from test_cycles_agreement import assert_means_agree
+
+    h.camera(location=(0, -4, 3), target=(0, 0, 0.3))
+    floor_mat = h.node_material("Floor", "ShaderNodeBsdfDiffuse")
+    nt = floor_mat.node_tree
+    diffuse = next(n for n in nt.nodes if n.type == "BSDF_DIFFUSE")
+    mapping = nt.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Scale"].default_value = (3.0, 3.0, 1.0)
+    uv = nt.nodes.new("ShaderNodeUVMap")
+    tex = _tex(nt, _image("Checker", _checker(), "sRGB"))
+    nt.links.new(uv.outputs["UV"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    nt.links.new(tex.outputs["Color"], diffuse.inputs["Color"])
+    floor = h.plane("Floor", size=8, material=floor_mat)
+    layer = floor.data.uv_layers.new(name="UVMap")
+    for loop in floor.data.loops:
+        layer.data[loop.index].uv = [(0, 0), (1, 0), (1, 1), (0, 1)][loop.vertex_index]
+    box_mat = h.node_material("Box", "ShaderNodeBsdfPrincipled")
+    nt = box_mat.node_tree
+    bsdf = next(n for n in nt.nodes if n.type == "BSDF_PRINCIPLED")
+    coord = nt.nodes.new("ShaderNodeTexCoord")
+    tex = _tex(nt, _image("BoxTex", _checker(4, (0.8, 0.45, 0.2), (0.2, 0.7, 0.3)), "sRGB"))
+    nt.links.new(coord.outputs["Generated"], tex.inputs["Vector"])
+    nt.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    bsdf.inputs["Roughness"].default_value = 1.0
+    h.box("Box", size=(1, 1, 1), location=(0.3, 0.3, 0.5), material=box_mat)
+    h.light("POINT", location=(0, -0.5, 2), energy=300, color=(1, 0.9, 0.8), shadow_soft_size=0)
+    e, c = render_both(tmp_path, integrator=integrator, tag=f"tex_room_{integrator}")
+    assert_means_agree(e, c, rtol=0.04)

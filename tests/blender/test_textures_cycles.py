@@ -234,14 +234,14 @@ def test_textured_room_with_indirect_light_agrees_with_cycles(tmp_path, integrat
     layer = floor.data.uv_layers.new(name="UVMap")
     for loop in floor.data.loops:
         layer.data[loop.index].uv = [(0, 0), (1, 0), (1, 1), (0, 1)][loop.vertex_index]
-    box_mat = h.node_material("Box", "ShaderNodeBsdfPrincipled")
+    # a Diffuse BSDF: 3.x's Principled diffuse is Burley's (retro-reflective), not the core's
+    box_mat = h.node_material("Box", "ShaderNodeBsdfDiffuse")
     nt = box_mat.node_tree
-    bsdf = next(n for n in nt.nodes if n.type == "BSDF_PRINCIPLED")
+    bsdf = next(n for n in nt.nodes if n.type == "BSDF_DIFFUSE")
     coord = nt.nodes.new("ShaderNodeTexCoord")
     tex = _tex(nt, _image("BoxTex", _checker(4, (0.8, 0.45, 0.2), (0.2, 0.7, 0.3)), "sRGB"))
     nt.links.new(coord.outputs["Generated"], tex.inputs["Vector"])
-    nt.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
-    bsdf.inputs["Roughness"].default_value = 1.0
+    nt.links.new(tex.outputs["Color"], bsdf.inputs["Color"])
     h.box("Box", size=(1, 1, 1), location=(0.3, 0.3, 0.5), material=box_mat)
     h.light("POINT", location=(0, -0.5, 2), energy=300, color=(1, 0.9, 0.8), shadow_soft_size=0)
     e, c = render_both(tmp_path, integrator=integrator, tag=f"tex_room_{integrator}")

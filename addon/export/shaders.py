@@ -555,9 +555,7 @@ class _Compiler:
         if compat.PRINCIPLED_V4:
             ior = self.value(get("ior"), ctx, "F")
             if is_ref(ior):  # ((ior-1)/(ior+1))² · 2 / 0.08 · level
-                f = self.ref("MATH", {"Value": self.ref("MATH", {"Value": ior, "Value_001": 1.0, "Value_002": 0.0}, "Value", {"operation": "SUBTRACT", "use_clamp": False}),
-                                      "Value_001": self.ref("MATH", {"Value": ior, "Value_001": 1.0, "Value_002": 0.0}, "Value", {"operation": "ADD", "use_clamp": False}),
-                                      "Value_002": 0.0}, "Value", {"operation": "DIVIDE", "use_clamp": False})
+                f = self.div(self.sub(ior, 1.0), self.add(ior, 1.0, "F"))
                 f = self.mul(self.mul(f, f), 25.0)
                 specular = self.mul(f, level)
             else:
@@ -583,6 +581,14 @@ class _Compiler:
             return a
         return self.ref("MATH", {"Value": a, "Value_001": b, "Value_002": 0.0}, "Value",
                         {"operation": "MULTIPLY", "use_clamp": False})
+
+    def sub(self, a, b):
+        return self.ref("MATH", {"Value": a, "Value_001": b, "Value_002": 0.0}, "Value",
+                        {"operation": "SUBTRACT", "use_clamp": False})
+
+    def div(self, a, b):
+        return self.ref("MATH", {"Value": a, "Value_001": b, "Value_002": 0.0}, "Value",
+                        {"operation": "DIVIDE", "use_clamp": False})
 
     def scale(self, color, strength):
         if not is_ref(color) and not is_ref(strength):
@@ -818,12 +824,18 @@ def _row_constants(c: Closure, comp: _Compiler | None = None) -> dict:
     metal = est(c.metallic, 0.0)
     spec = est(c.specular, 0.5)
     emit = est(c.emission, (0.0, 0.0, 0.0))
+    def vec(v):
+        return np.asarray(v, float).reshape(-1)[:3] if np.ndim(v) else np.full(3, float(v))
+
+    def num(v):
+        return float(v if np.ndim(v) == 0 else np.mean(v))
+
     return dict(
-        base_color=tuple(float(x) for x in np.clip(np.asarray(base, float).reshape(-1)[:3] if np.ndim(base) else [base] * 3, 0.0, 1.0)),
-        roughness=_clip01(rough if np.ndim(rough) == 0 else np.mean(rough)),
-        metallic=_clip01(metal if np.ndim(metal) == 0 else np.mean(metal)),
-        specular=max(float(spec if np.ndim(spec) == 0 else np.mean(spec)), 0.0),
-        emission=tuple(float(x) for x in np.maximum(np.asarray(emit, float).reshape(-1)[:3] if np.ndim(emit) else [emit] * 3, 0.0)),
+        base_color=tuple(float(x) for x in np.clip(vec(base), 0.0, 1.0)),
+        roughness=_clip01(num(rough)),
+        metallic=_clip01(num(metal)),
+        specular=max(num(spec), 0.0),
+        emission=tuple(float(x) for x in np.maximum(vec(emit), 0.0)),
     )
 
 

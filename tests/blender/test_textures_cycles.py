@@ -130,8 +130,8 @@ def test_mix_shader_with_textured_factor_agrees_with_cycles(tmp_path):
     assert np.allclose(qe, qc, rtol=0.03, atol=2e-3)
 
 
-@pytest.mark.parametrize("integrator", ["PATH", "BDPT"])
-def test_normal_mapped_rotated_plane_agrees_with_cycles(tmp_path, integrator):
+@pytest.mark.parametrize("integrator,mirror", [("PATH", False), ("BDPT", False), ("PATH", True)])
+def test_normal_mapped_rotated_plane_agrees_with_cycles(tmp_path, integrator, mirror):
     """A constant tangent-space normal map tilting the normal towards +U, on a plane rotated
     about Z (world-space tangents) and lit by a sun from the side: cos θ follows the tilt."""
     mat = h.node_material("Bumpy", "ShaderNodeBsdfDiffuse", Color=(0.8, 0.8, 0.8))
@@ -141,14 +141,19 @@ def test_normal_mapped_rotated_plane_agrees_with_cycles(tmp_path, integrator):
     texel = np.zeros((2, 2, 4), np.float32)
     texel[...] = (0.8, 0.5, 0.9, 1.0)          # tangent-space normal (0.6, 0, 0.8) before normalising
     texel[1, :, :3] = (0.2, 0.5, 0.9)          # top half tilted the other way
+    if mirror:                                 # tilts along V: the bitangent sign matters
+        texel[0, :, :3] = (0.5, 0.8, 0.9)
+        texel[1, :, :3] = (0.5, 0.2, 0.9)
     nt.links.new(_tex(nt, _image("N", texel, "Non-Color")).outputs["Color"], nmap.inputs["Color"])
     nt.links.new(nmap.outputs["Normal"], diffuse.inputs["Normal"])
     ob = _scene("", material=mat)
     ob.rotation_euler = (0, 0, np.pi)          # U now runs along world −X
+    if mirror:                                 # negative scale: the bitangent sign flips
+        ob.scale = (1.0, -1.0, 1.0)
     sun = h.light("SUN", location=(0, 0, 5), energy=3.0)
-    sun.rotation_euler = (0, np.radians(-40), 0)
+    sun.rotation_euler = (np.radians(40), 0, 0) if mirror else (0, np.radians(-40), 0)
     ercuts, cycles = render_both(tmp_path, max_depth=1, samples=16, cycles_samples=16,
-                                 integrator=integrator, tag=f"tex_nmap_{integrator}")
+                                 integrator=integrator, tag=f"tex_nmap_{integrator}_{mirror}")
     qe, qc = _quadrants(ercuts), _quadrants(cycles)
     print("ercuts", np.round(qe, 4).tolist(), "cycles", np.round(qc, 4).tolist())
     assert abs(qc[0, 0, 0] - qc[1, 0, 0]) > 0.1 * qc.max()     # the tilt is visible in Cycles

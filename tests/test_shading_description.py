@@ -111,3 +111,25 @@ def test_textures_count_in_the_memory_plan():
     assert "textures" not in plain.parts
     assert textured.parts["textures"] >= 512 * 512 * 16
     assert textured.total - plain.total == textured.parts["textures"]
+
+
+def test_bad_programs_warn_naming_material_and_node_and_fall_back_to_constants():
+    good = '{"version": 1, "nodes": [{"type": "VALUE", "params": {"value": 0.2}}], ' \
+           '"outputs": {"roughness": {"node": 0, "socket": "Value"}}}'
+    bad = '{"version": 1, "nodes": [{"type": "TEX_NOISE"}], "outputs": {}}'
+    d = _textured(cornell_box(), programs=(good, bad, "{oops", ""))
+    v = sanitize(d)
+    msgs = [i.message for i in v.issues if i.code == "shading_program"]
+    assert len(msgs) == 2
+    assert "Material 'Red'" in msgs[0] and "node 0 (TEX_NOISE)" in msgs[0]
+    assert "Material 'Green'" in msgs[1]
+    assert v.desc.materials.programs == (good, "", "", "", "")
+
+
+def test_a_render_with_a_bad_program_reports_and_does_not_raise():
+    from ercuts_core import RenderSettings, render
+    bad = '{"version": 1, "nodes": [{"type": "MATH", "inputs": {"Value": {"node": 7, "socket": "Value"}}}]}'
+    d = _textured(cornell_box(16, 12), programs=("", bad, "", ""))
+    r = render(d, RenderSettings(integrator="PATH", samples=2))
+    assert np.isfinite(r.image).all()
+    assert any("Material 'Red'" in str(i) for i in r.issues)

@@ -293,3 +293,25 @@ def test_recoverable_problems_keep_the_program():
     assert prog is not None and len(notes) == 3
     col = prog.evaluate(context(), ["base_color"])["base_color"]
     np.testing.assert_array_equal(col, [[1, 0, 1]])                      # magenta
+
+
+def test_a_family_of_programs_evaluates_like_its_members():
+    """Programs differing only in constants and texture rows merge into one (SceneShading
+    evaluates a family at once); each lane gets its own material's constants."""
+    from ercuts_core.shading.program import merge, signature
+    imgs = (np.full((1, 1, 4), 0.25, np.float32), np.full((1, 1, 4), 0.75, np.float32))
+    progs = []
+    for k, (tex, gain) in enumerate([(0, 2.0), (1, 3.0), (1, 2.0)]):
+        text = json.dumps({"version": 1, "nodes": [
+            {"type": "TEX_IMAGE", "params": {"texture": tex}},
+            {"type": "MATH", "inputs": {"Value": {"node": 0, "socket": "Alpha"}, "Value_001": gain},
+             "params": {"operation": "MULTIPLY"}}],
+            "outputs": {"roughness": {"node": 1, "socket": "Value"}, "base_color": {"node": 0, "socket": "Color"}}})
+        progs.append(compile_program(text, f"M{k}", 2)[0])
+    assert len({signature(p) for p in progs}) == 1
+    family = merge(progs)
+    ctx = context([[1 / 3] * 3] * 3, textures=TextureTable(("a", "b"), imgs))
+    ctx.lane_row = np.array([0, 1, 2])
+    got = family.evaluate(ctx, ["roughness", "base_color"])
+    np.testing.assert_allclose(got["roughness"], [0.5, 2.25, 1.5])
+    np.testing.assert_allclose(got["base_color"][:, 0], [0.25, 0.75, 0.75])

@@ -79,16 +79,19 @@ class MeshShading:
         b2 = (v * self.g2[prim]).sum(1)
         return np.stack([1.0 - b1 - b2, b1, b2], axis=1)
 
-    def context(self, prim: NDArray, b: NDArray, ng: NDArray, ns: NDArray) -> "ShadingContext":
+    def context(self, prim: NDArray, b: NDArray, ng: NDArray, ns: NDArray,
+                lane_row: NDArray | None = None) -> "ShadingContext":
         """The shading inputs of N hits (``ns``: the smooth shading normal before maps)."""
-        return ShadingContext(self, np.asarray(prim, np.int64), b, ng, ns)
+        return ShadingContext(self, np.asarray(prim, np.int64), b, ng, ns, lane_row=lane_row)
 
 
 @dataclass
 class ShadingContext:
     """Shading inputs of N hits of one material (all (N, …) float64, computed on demand).
 
-    ``bump_heights`` is set by the program evaluator for the BUMP node it is evaluating.
+    ``bump_heights`` is set by the program evaluator for the BUMP node it is evaluating;
+    ``lane_row`` (N,) is each hit's material index within a program family
+    (:func:`ercuts_core.shading.program.merge`), None outside families.
     """
 
     mesh: MeshShading
@@ -97,6 +100,7 @@ class ShadingContext:
     ng: NDArray
     ns: NDArray
     bump_heights: tuple | None = field(default=None)
+    lane_row: NDArray | None = field(default=None)
 
     @property
     def n(self) -> int:

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .geometry import MeshShading
-from .program import BSDF_OUTPUTS, compile_program
+from .program import BSDF_OUTPUTS, compile_program, merge, signature
 
 #: Points per triangle (a 4×4 stratified barycentric grid) for textured emission.
 EMISSION_SAMPLES = 4
@@ -68,6 +68,7 @@ class SceneShading:
                                   for p in self.programs], bool)
         self.row_emission = np.array([p is not None and p.has("emission") for p in self.programs], bool)
         self.row_alpha = np.array([p is not None and p.has("alpha") for p in self.programs], bool)
+        self._init_families()
         if self.active:
             m = desc.mesh
             self.mesh = MeshShading(tri_p, m.uvs, m.tangents, m.object_ids, desc.textures)
@@ -75,6 +76,22 @@ class SceneShading:
                           "roughness": mats.roughness.astype(np.float64),
                           "metallic": mats.metallic.astype(np.float64),
                           "specular": mats.specular.astype(np.float64)}
+
+    def _init_families(self) -> None:
+        """Group rows whose programs differ only in constants (:func:`program.signature`):
+        ``family[f]`` is the merged program, ``row_family`` (M,) its index (−1: no
+        program) and ``row_index`` (M,) the row's index in its family."""
+        self.row_family = np.full(self.n_rows, -1, np.int64)
+        self.row_index = np.zeros(self.n_rows, np.int64)
+        groups: dict[str, list[int]] = {}
+        for row, prog in enumerate(self.programs):
+            if prog is not None:
+                groups.setdefault(signature(prog), []).append(row)
+        self.families = []
+        for f, rows in enumerate(groups.values()):
+            self.families.append(merge([self.programs[r] for r in rows]))
+            self.row_family[rows] = f
+            self.row_index[rows] = np.arange(len(rows))
 
     # -- keys ------------------------------------------------------------------------
 
@@ -91,17 +108,20 @@ class SceneShading:
 
     # -- evaluation ------------------------------------------------------------------
 
-    def _by_material(self, rows: NDArray, sel: NDArray):
-        """Yield (material row, lane indices) for the lanes ``sel`` grouped by material."""
+    def _by_family(self, rows: NDArray, sel: NDArray):
+        """Yield (merged program, lane indices, lane_row) for the lanes ``sel`` grouped by
+        program family (one evaluation per family, not per material: families share the
+        per-node Python overhead; ``lane_row`` selects each lane's constants)."""
         lanes = np.flatnonzero(sel)
         if not len(lanes):
             return
-        r = rows[lanes]
-        order = np.argsort(r, kind="stable")
-        r, lanes = r[order], lanes[order]
-        cuts = np.flatnonzero(np.diff(r)) + 1
+        fam = self.row_family[rows[lanes]]
+        order = np.argsort(fam, kind="stable")
+        fam, lanes = fam[order], lanes[order]
+        cuts = np.flatnonzero(np.diff(fam)) + 1
         for group in np.split(np.arange(len(lanes)), cuts):
-            yield int(r[group[0]]), lanes[group]
+            mine = lanes[group]
+            yield self.families[int(fam[group[0]])], mine, self.row_index[rows[mine]]
 
     def shading_normals(self, valid: NDArray, prim: NDArray, b: NDArray, mat: NDArray,
                         ng: NDArray, ns: NDArray) -> NDArray:
@@ -111,9 +131,9 @@ class SceneShading:
         if not sel.any():
             return ns
         out = ns.copy()
-        for row, lanes in self._by_material(mat, sel):
-            ctx = self.mesh.context(prim[lanes], b[lanes], ng[lanes], ns[lanes])
-            n = self.programs[row].evaluate(ctx, ["normal"])["normal"]
+        for program, lanes, lane_row in self._by_family(mat, sel):
+            ctx = self.mesh.context(prim[lanes], b[lanes], ng[lanes], ns[lanes], lane_row)
+            n = program.evaluate(ctx, ["normal"])["normal"]
             flip = (n * ng[lanes]).sum(1) < 0
             out[lanes] = np.where(flip[:, None], -n, n)
         return out
@@ -131,10 +151,10 @@ class SceneShading:
             return out
         prim = np.where(textured, key - self.n_rows, 0)
         p, ns, ng = (np.asarray(a, np.float64).reshape(-1, 3) for a in (p, ns, ng))
-        for row, lanes in self._by_material(rows, textured):
+        for program, lanes, lane_row in self._by_family(rows, textured):
             b = self.mesh.barycentrics(prim[lanes], p[lanes])
-            ctx = self.mesh.context(prim[lanes], b, ng[lanes], ns[lanes])
-            for name, val in self.programs[row].evaluate(ctx, BSDF_OUTPUTS).items():
+            ctx = self.mesh.context(prim[lanes], b, ng[lanes], ns[lanes], lane_row)
+            for name, val in program.evaluate(ctx, BSDF_OUTPUTS).items():
                 out[name][lanes] = val
         return out
 
@@ -143,10 +163,10 @@ class SceneShading:
         out = np.ones(len(prim))
         rows = self.tri_mat[prim]
         sel = self.row_alpha[rows]
-        for row, lanes in self._by_material(rows, sel):
+        for program, lanes, lane_row in self._by_family(rows, sel):
             ng = self.tri_ng[prim[lanes]]
-            ctx = self.mesh.context(prim[lanes], b[lanes], ng, ng)
-            out[lanes] = np.clip(self.programs[row].evaluate(ctx, ["alpha"])["alpha"], 0.0, 1.0)
+            ctx = self.mesh.context(prim[lanes], b[lanes], ng, ng, lane_row)
+            out[lanes] = np.clip(program.evaluate(ctx, ["alpha"])["alpha"], 0.0, 1.0)
         return out
 
     def triangle_emission(self, emission: NDArray) -> NDArray:
@@ -163,9 +183,10 @@ class SceneShading:
         prim = np.repeat(tris, len(grid))
         b = np.tile(grid, (len(tris), 1))
         ng = self.tri_ng[prim]
-        for row, lanes in self._by_material(self.tri_mat[prim], np.ones(len(prim), bool)):
-            ctx = self.mesh.context(prim[lanes], b[lanes], ng[lanes], ng[lanes])
-            val = self.programs[row].evaluate(ctx, ["emission"])["emission"]
+        rows = self.tri_mat[prim]
+        for program, lanes, lane_row in self._by_family(rows, np.ones(len(prim), bool)):
+            ctx = self.mesh.context(prim[lanes], b[lanes], ng[lanes], ng[lanes], lane_row)
+            val = program.evaluate(ctx, ["emission"])["emission"]
             sums = np.zeros((len(em), 3))
             np.add.at(sums, prim[lanes], val)
             mine = np.unique(prim[lanes])

@@ -132,13 +132,16 @@ def tex_image(inp, params, ctx):
     """TEX_IMAGE: :func:`ercuts_core.shading.textures.lookup` at Vector.xy (default: UV).
     An out-of-range texture row reads Cycles' magenta (the validator warns)."""
     uv = inp.vec("Vector")[:, :2] if inp.has("Vector") else ctx.uv
-    idx = int(params.get("texture", -1))
+    tex = params.get("texture", -1)
     images = ctx.textures.images
-    if 0 <= idx < len(images):
-        rgba = lookup(images[idx], uv, params.get("interpolation", "Linear"),
-                      params.get("extension", "REPEAT"))
-    else:
-        rgba = np.tile([1.0, 0.0, 1.0, 1.0], (ctx.n, 1))
+    # A family of materials (program.merge) gives one texture row per material
+    idx = tex[ctx.lane_row] if isinstance(tex, np.ndarray) else np.full(ctx.n, int(tex))
+    rgba = np.tile([1.0, 0.0, 1.0, 1.0], (ctx.n, 1))
+    for row in np.unique(idx):
+        if 0 <= row < len(images):
+            sel = idx == row
+            rgba[sel] = lookup(images[row], uv[sel], params.get("interpolation", "Linear"),
+                               params.get("extension", "REPEAT"))
     return {"Color": (rgba[:, :3], C), "Alpha": (rgba[:, 3], F)}
 
 

@@ -194,7 +194,7 @@ class Program:
         n = ctx.n
         for i in self.closure(values):
             node = self.nodes[i]
-            inputs = {k: _resolve(v, results, n) for k, v in node.inputs.items()}
+            inputs = {k: _resolve(v, results, ctx) for k, v in node.inputs.items()}
             fn = NODES[node.type][0]
             node_ctx = ctx
             if node.type == "BUMP":
@@ -211,8 +211,8 @@ class Program:
             h = np.ones(ctx.n)
             return h, h, h, dpdx, dpdy
         h = as_float(inputs["Height"])
-        hx = as_float(_resolve(height, self._run(ctx_x, [height]), ctx.n))
-        hy = as_float(_resolve(height, self._run(ctx_y, [height]), ctx.n))
+        hx = as_float(_resolve(height, self._run(ctx_x, [height]), ctx_x))
+        hy = as_float(_resolve(height, self._run(ctx_y, [height]), ctx_y))
         return h, hx, hy, dpdx, dpdy
 
     def evaluate(self, ctx, names) -> dict[str, NDArray]:
@@ -222,7 +222,7 @@ class Program:
         results = self._run(ctx, [self.outputs[name] for name in present])
         out = {}
         for name in present:
-            val = _resolve(self.outputs[name], results, ctx.n)
+            val = _resolve(self.outputs[name], results, ctx)
             arr = as_float(val) if OUTPUTS[name] == F else as_vec(val)
             out[name] = np.where(np.isfinite(arr), arr, 0.0)
         if "normal" in out:
@@ -232,13 +232,74 @@ class Program:
         return out
 
 
-def _resolve(v, results: dict, n: int):
-    """An input/output value over n hits: (array, kind)."""
+def _resolve(v, results: dict, ctx):
+    """An input/output value over the context's hits: (array, kind)."""
+    n = ctx.n
     if isinstance(v, Ref):
         outs = results[v.node]
         if v.socket in outs:
             return outs[v.socket]
         return np.zeros(n), F                      # LIGHT_PATH sockets not modelled
+    if isinstance(v, LaneConst):
+        return v.table[ctx.lane_row], v.kind
     if v.kind == F:
         return np.full(n, v.value), F
     return np.tile(v.value, (n, 1)), v.kind
+
+
+# ---------------------------------------------------------------------------------------
+# Families: programs that differ only in constants, evaluated together
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class LaneConst:
+    """A constant that differs between the materials of a family: ``table[lane_row]``
+    ((R,) floats or (R, 3) colours/vectors) with ``ctx.lane_row`` the hit's material
+    index in the family."""
+
+    table: NDArray
+    kind: str
+
+
+def _value_key(v) -> list:
+    return ["ref", v.node, v.socket] if isinstance(v, Ref) else ["const", v.kind]
+
+
+def signature(program: Program) -> str:
+    """The program's structure without its constant inputs and texture rows: programs with
+    equal signatures (e.g. every material an importer made from one template) can be
+    evaluated as one merged program (:func:`merge`), so the per-node Python overhead is paid once
+    per family rather than once per material."""
+    nodes = []
+    for node in program.nodes:
+        params = {k: v for k, v in node.params.items() if not (node.type == "TEX_IMAGE" and k == "texture")}
+        nodes.append([node.type, sorted((k, _value_key(v)) for k, v in node.inputs.items()), params])
+    outputs = sorted((k, _value_key(v)) for k, v in program.outputs.items())
+    return json.dumps([nodes, outputs], sort_keys=True, default=str)
+
+
+def _merge_value(values: list):
+    first = values[0]
+    if isinstance(first, Ref):
+        return first
+    table = np.array([v.value for v in values], np.float64)
+    if (table == table[0]).all():
+        return first
+    return LaneConst(table, first.kind)
+
+
+def merge(programs: list[Program]) -> Program:
+    """One program for a family of programs with equal :func:`signature`: constants that
+    differ become :class:`LaneConst`, TEX_IMAGE texture rows an (R,) int array."""
+    base = programs[0]
+    nodes = []
+    for i, node in enumerate(base.nodes):
+        inputs = {k: _merge_value([p.nodes[i].inputs[k] for p in programs]) for k in node.inputs}
+        params = dict(node.params)
+        if node.type == "TEX_IMAGE":
+            rows = np.array([p.nodes[i].params.get("texture", -1) for p in programs], np.int64)
+            params["texture"] = int(rows[0]) if (rows == rows[0]).all() else rows
+        nodes.append(replace(node, inputs=inputs, params=params))
+    outputs = {k: _merge_value([p.outputs[k] for p in programs]) for k in base.outputs}
+    return Program(tuple(nodes), outputs)

@@ -44,10 +44,8 @@ class MaterialRow:
     uses_tangents: bool = False
     uv_maps: frozenset = frozenset()
 
-    @property
-    def needs_object_matrix(self) -> bool:
-        """An object-space Normal Map: one row per object matrix (``MaterialCollector``)."""
-        return '"object_matrix":null' in self.program
+    #: an object-space Normal Map: one row per object matrix (``MaterialCollector``)
+    needs_object_matrix: bool = False
 
     @property
     def is_emissive(self) -> bool:
@@ -120,7 +118,8 @@ def read_material(mat, textures=None) -> tuple[MaterialRow, list[str]]:
     compiled = compile_material(mat, textures)
     row = MaterialRow(mat.name, **compiled.constants, program=compiled.program,
                       uses_uvs=compiled.uses_uvs, uses_tangents=compiled.uses_tangents,
-                      uv_maps=frozenset(compiled.uv_maps))
+                      uv_maps=frozenset(compiled.uv_maps),
+                      needs_object_matrix=compiled.needs_object_matrix)
     return row, compiled.notes
 
 
@@ -181,7 +180,8 @@ class MaterialCollector:
         for node in program["nodes"]:
             if node["type"] == "NORMAL_MAP" and node["params"].get("space") == "OBJECT":
                 node["params"]["object_matrix"] = m3.tolist()
-        variant = dataclasses.replace(base, program=json.dumps(program, separators=(",", ":")))
+        variant = dataclasses.replace(base, program=json.dumps(program, separators=(",", ":")),
+                                      needs_object_matrix=False)
         self._index[key] = len(self.rows)
         self.rows.append(variant)
         return self._index[key]

@@ -181,6 +181,7 @@ class Compiled:
         notes: what could not be translated (one entry per node/issue).
         uses_uvs / uses_tangents: the program reads ``MeshTable.uvs`` / ``.tangents``.
         uv_maps: UV map names that UV Map / Normal Map nodes ask for ("" = active render).
+        needs_object_matrix: an object-space Normal Map (one row per object matrix).
     """
 
     constants: dict
@@ -189,6 +190,7 @@ class Compiled:
     uses_uvs: bool = False
     uses_tangents: bool = False
     uv_maps: set = field(default_factory=set)
+    needs_object_matrix: bool = False
 
 
 class _Compiler:
@@ -200,6 +202,7 @@ class _Compiler:
         self.uses_uvs = False
         self.uses_tangents = False
         self.uv_maps: set[str] = set()
+        self.needs_object_matrix = False
         self._cse: dict[str, int] = {}
         self._memo: dict = {}
         self._busy: set = set()
@@ -471,7 +474,7 @@ class _Compiler:
             self.uses_uvs = True
             self.uv_maps.add(node.uv_map)
         elif params["space"] == "OBJECT":
-            params["object_matrix"] = None  # filled per object by the collector
+            self.needs_object_matrix = True  # ``object_matrix`` added per object (materials.py)
         return self.ref("NORMAL_MAP", self.inputs_of(node, ctx), psocket, params)
 
     def _n_bump(self, node, out, ctx, ptype, psocket):
@@ -814,7 +817,8 @@ def compile_material(mat, textures=None) -> Compiled:
     else:
         comp.uses_uvs = comp.uses_tangents = False
         comp.uv_maps = set()
-    return Compiled(constants, program, comp.notes, comp.uses_uvs, comp.uses_tangents, comp.uv_maps)
+    return Compiled(constants, program, comp.notes, comp.uses_uvs, comp.uses_tangents, comp.uv_maps,
+                    bool(program) and comp.needs_object_matrix)
 
 
 def _row_constants(c: Closure, comp: _Compiler | None = None) -> dict:

@@ -251,3 +251,26 @@ def test_textured_room_with_indirect_light_agrees_with_cycles(tmp_path, integrat
     h.light("POINT", location=(0, -0.5, 2), energy=300, color=(1, 0.9, 0.8), shadow_soft_size=0)
     e, c = render_both(tmp_path, integrator=integrator, tag=f"tex_room_{integrator}")
     assert_means_agree(e, c, rtol=0.04)
+
+
+def test_object_space_normal_map_on_a_rotated_plane_agrees_with_cycles(tmp_path):
+    mat = h.node_material("ObjN", "ShaderNodeBsdfDiffuse", Color=(0.8, 0.8, 0.8))
+    nt = mat.node_tree
+    diffuse = next(n for n in nt.nodes if n.type == "BSDF_DIFFUSE")
+    nmap = nt.nodes.new("ShaderNodeNormalMap")
+    nmap.space = "OBJECT"
+    texel = np.ones((2, 2, 4), np.float32)
+    texel[0, :, :3] = (0.8, 0.5, 0.9)
+    texel[1, :, :3] = (0.2, 0.5, 0.9)
+    nt.links.new(_tex(nt, _image("ON", texel, "Non-Color")).outputs["Color"], nmap.inputs["Color"])
+    nt.links.new(nmap.outputs["Normal"], diffuse.inputs["Normal"])
+    ob = _scene("", material=mat)
+    ob.rotation_euler = (0, 0, np.pi)
+    sun = h.light("SUN", location=(0, 0, 5), energy=3.0)
+    sun.rotation_euler = (0, np.radians(-40), 0)
+    ercuts, cycles = render_both(tmp_path, max_depth=1, samples=16, cycles_samples=16,
+                                 integrator="PATH", tag="tex_objn")
+    qe, qc = _quadrants(ercuts), _quadrants(cycles)
+    print("ercuts", np.round(qe, 4).tolist(), "cycles", np.round(qc, 4).tolist())
+    assert abs(qc[0, 0, 0] - qc[1, 0, 0]) > 0.1 * qc.max()
+    assert np.allclose(qe, qc, rtol=0.03, atol=3e-3)

@@ -154,7 +154,7 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         if ob.type not in GEOMETRY_TYPES or not inst.show_self:
             continue
         # UVs and tangents only for objects whose materials read them (they cost memory).
-        slot_rows = materials.slot_table(ob, _relative(inst.matrix_world, origin))
+        slot_rows = materials.slot_table(ob, _relative(inst.matrix_world, origin), origin)
         used_rows = [materials.rows[r] for r in np.unique(slot_rows)]
         want_uvs = any(r.uses_uvs for r in used_rows)
         want_tangents = any(r.uses_tangents for r in used_rows)

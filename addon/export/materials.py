@@ -13,14 +13,13 @@ object-space Normal Map get one row per object matrix.
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .. import compat
 from .images import TextureCollector
-from .shaders import compile_material
+from .shaders import ObjectSpace, compile_material
 from .shaders import output_node as output_node  # noqa: F401  (re-exported for lights/world)
 
 #: Cycles' default surface (objects without material, unsupported shaders): grey diffuse.
@@ -109,6 +108,17 @@ def follow_link(socket):
     return None, None
 
 
+def _texspace(obj) -> tuple:
+    """(location, size) of the object's texture space (Blender's Generated coordinates);
+    the unit box when its data has none."""
+    data = getattr(obj, "data", None)
+    loc = getattr(data, "texspace_location", None)
+    size = getattr(data, "texspace_size", None)
+    if loc is None or size is None:
+        return (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)
+    return tuple(loc), tuple(size)
+
+
 def read_material(mat, textures=None) -> tuple[MaterialRow, list[str]]:
     """One material's row (with its shading program), and the list of things that could
     not be translated. ``textures``: the scene's :class:`.images.TextureCollector`."""
@@ -151,36 +161,32 @@ class MaterialCollector:
         self.rows.append(material)
         return self._index[key]
 
-    def slot_table(self, obj, world_from_object=None) -> np.ndarray:
+    def slot_table(self, obj, world_from_object=None, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
         """int32 array mapping each material slot of ``obj`` to a row (at least one entry).
 
-        Materials with an object-space Normal Map get one row per object matrix
-        (``world_from_object``, 4×4), their NORMAL_MAP ``object_matrix`` filled in.
+        Materials with per-object nodes (Texture Coordinate Object/Generated/Normal,
+        object-space Normal Map) get one row per object matrix and texture space
+        (``world_from_object``: 4×4 in description coordinates, ``origin``: the
+        description's origin), compiled again with that :class:`.shaders.ObjectSpace`.
         """
-        slots = [self.index_of(slot.material) for slot in obj.material_slots]
-        if not slots:
-            slots = [self.index_of(None)]
+        mats = [slot.material for slot in obj.material_slots] or [None]
+        slots = [self.index_of(m) for m in mats]
         if world_from_object is not None:
-            slots = [self._object_variant(r, world_from_object) if self.rows[r].needs_object_matrix
-                     else r for r in slots]
+            space = None
+            for i, (m, r) in enumerate(zip(mats, slots)):
+                if self.rows[r].needs_object_matrix:
+                    space = space or ObjectSpace(world_from_object, *_texspace(obj), origin)
+                    slots[i] = self._object_variant(r, self.override or m, space)
         return np.asarray(slots, np.int32)
 
-    def _object_variant(self, row: int, world_from_object) -> int:
-        """The row of material ``row`` whose object-space normal maps use this object's
-        matrix: NORMAL_MAP ``object_matrix`` = the 3×3 linear part of the object's world
-        matrix (world_from_object, row-major; the core transforms normals with its inverse
-        transpose and normalises)."""
-        m3 = np.asarray(world_from_object, np.float64)[:3, :3]
-        key = ("OBJ", row, tuple(np.round(m3, 9).ravel()))
+    def _object_variant(self, row: int, mat, space: ObjectSpace) -> int:
+        """The row of material ``mat`` (base row ``row``) compiled for one object."""
+        key = ("OBJ", row, space.key())
         found = self._index.get(key)
         if found is not None:
             return found
-        base = self.rows[row]
-        program = json.loads(base.program)
-        for node in program["nodes"]:
-            if node["type"] == "NORMAL_MAP" and node["params"].get("space") == "OBJECT":
-                node["params"]["object_matrix"] = m3.tolist()
-        variant = dataclasses.replace(base, program=json.dumps(program, separators=(",", ":")),
+        compiled = compile_material(mat, self.textures, space)  # notes: same as the base row's
+        variant = dataclasses.replace(self.rows[row], **compiled.constants, program=compiled.program,
                                       needs_object_matrix=False)
         self._index[key] = len(self.rows)
         self.rows.append(variant)

@@ -181,7 +181,8 @@ class Compiled:
         notes: what could not be translated (one entry per node/issue).
         uses_uvs / uses_tangents: the program reads ``MeshTable.uvs`` / ``.tangents``.
         uv_maps: UV map names that UV Map / Normal Map nodes ask for ("" = active render).
-        needs_object_matrix: an object-space Normal Map (one row per object matrix).
+        needs_object_matrix: per-object nodes (Texture Coordinate Object/Generated/Normal,
+            object-space Normal Map): compile again per object with an :class:`ObjectSpace`.
     """
 
     constants: dict
@@ -194,9 +195,10 @@ class Compiled:
 
 
 class _Compiler:
-    def __init__(self, material_name: str, textures=None):
+    def __init__(self, material_name: str, textures=None, space: "ObjectSpace | None" = None):
         self.material_name = material_name
         self.textures = textures
+        self.space = space
         self.nodes: list[dict] = []
         self.notes: list[str] = []
         self.uses_uvs = False
@@ -401,12 +403,42 @@ class _Compiler:
         return self.uvmap()
 
     def _n_tex_coord(self, node, out, ctx, ptype, psocket):
+        """UV from the UV map; Object, Generated and Normal per object (``self.space``): the
+        core's TEX_COORD gives the world position / shading normal, the exporter maps them
+        into the object's space with the object's matrix and texture space (one row per
+        object, :meth:`..materials.MaterialCollector.slot_table`)."""
         if psocket == "UV":
             return self.uvmap()
-        if psocket in {"Object"} and node.object is not None:
-            self.note(f"Texture Coordinate '{node.name}': another object's space "
-                      f"('{node.object.name}') ignored, using this object's")
-        return self.ref("TEX_COORD", {}, psocket)
+        self.needs_object_matrix = True
+        if self.space is None:
+            return self.ref("TEX_COORD", {}, psocket)
+        sp = self.space
+        if psocket == "Normal":  # object-space normal: normalize(Mᵀ n)
+            m3 = sp.world_from_object[:3, :3]
+            return self.normalize(self.affine(self.ref("TEX_COORD", {}, "Normal"), m3.T, None))
+        m = sp.world_from_object
+        if psocket == "Object" and node.object is not None:
+            m = sp.matrix_of(node.object)
+        inv = np.linalg.inv(m)
+        linear, offset = inv[:3, :3], inv[:3, 3]
+        if psocket == "Generated":
+            # Blender: (co − (L − S)) / 2S with the texture space location L and size S
+            # (a zero size counts as 1, as BKE_mesh_texspace_calc does)
+            size = np.where(np.abs(sp.texspace_size) > 0, sp.texspace_size, 1.0)
+            k = 1.0 / (2.0 * size)
+            linear = k[:, None] * linear
+            offset = k * (offset - (np.asarray(sp.texspace_location) - size))
+        return self.affine(self.ref("TEX_COORD", {}, "Object"), linear, offset)
+
+    def affine(self, v, linear, offset):
+        """``linear @ v + offset`` with value nodes (3 dot products, COMBXYZ, ADD)."""
+        rows = [self.ref("VECT_MATH", {"Vector": v, "Vector_001": [float(x) for x in row],
+                                       "Vector_002": [0.0] * 3, "Scale": 1.0}, "Value",
+                         {"operation": "DOT_PRODUCT"}) for row in np.asarray(linear, float)]
+        out = self.ref("COMBXYZ", {"X": rows[0], "Y": rows[1], "Z": rows[2]}, "Vector")
+        if offset is None or not np.any(offset):
+            return out
+        return self.add(out, _vec3(offset), "V")
 
     def _n_light_path(self, node, out, ctx, ptype, psocket):
         self.note(f"Light Path '{node.name}': '{out.name}' evaluated as "
@@ -474,7 +506,9 @@ class _Compiler:
             self.uses_uvs = True
             self.uv_maps.add(node.uv_map)
         elif params["space"] == "OBJECT":
-            self.needs_object_matrix = True  # ``object_matrix`` added per object (materials.py)
+            self.needs_object_matrix = True  # compiled again per object (materials.py)
+            if self.space is not None:
+                params["object_matrix"] = self.space.world_from_object[:3, :3].tolist()
         return self.ref("NORMAL_MAP", self.inputs_of(node, ctx), psocket, params)
 
     def _n_bump(self, node, out, ctx, ptype, psocket):
@@ -790,10 +824,37 @@ def _clip01(v):
     return float(min(max(float(v), 0.0), 1.0))
 
 
-def compile_material(mat, textures=None) -> Compiled:
+@dataclass
+class ObjectSpace:
+    """What per-object nodes need (Texture Coordinate Object/Generated/Normal, object-space
+    Normal Map): the object's matrix in description coordinates, its texture space, and the
+    description's origin (for a Texture Coordinate naming another object)."""
+
+    world_from_object: np.ndarray
+    texspace_location: tuple = (0.0, 0.0, 0.0)
+    texspace_size: tuple = (1.0, 1.0, 1.0)
+    origin: tuple = (0.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        self.world_from_object = np.asarray(self.world_from_object, np.float64)
+        self.texspace_location = np.asarray(self.texspace_location, np.float64)
+        self.texspace_size = np.asarray(self.texspace_size, np.float64)
+
+    def matrix_of(self, obj) -> np.ndarray:
+        m = np.array(obj.matrix_world, np.float64)
+        m[:3, 3] -= np.asarray(self.origin, np.float64)
+        return m
+
+    def key(self) -> tuple:
+        return (tuple(np.round(self.world_from_object, 9).ravel()),
+                tuple(np.round(self.texspace_location, 9)), tuple(np.round(self.texspace_size, 9)))
+
+
+def compile_material(mat, textures=None, space: ObjectSpace | None = None) -> Compiled:
     """Compile ``mat``'s node tree (it must use nodes). ``textures``: a texture collector
-    (``index_of(image, material_name) → (row, info)``) or None to skip images."""
-    comp = _Compiler(mat.name, textures)
+    (``index_of(image, material_name) → (row, info)``) or None to skip images. ``space``:
+    the object the row is for, when :attr:`Compiled.needs_object_matrix` said it matters."""
+    comp = _Compiler(mat.name, textures, space)
     out = output_node(mat.node_tree)
     if out is None:
         comp.note("no material output node")

@@ -274,3 +274,43 @@ def test_object_space_normal_map_on_a_rotated_plane_agrees_with_cycles(tmp_path)
     print("ercuts", np.round(qe, 4).tolist(), "cycles", np.round(qc, 4).tolist())
     assert abs(qc[0, 0, 0] - qc[1, 0, 0]) > 0.1 * qc.max()
     assert np.allclose(qe, qc, rtol=0.03, atol=3e-3)
+
+
+def _blocks(img, n=4):
+    hgt, wid = img.shape[:2]
+    return img[:hgt // n * n, :wid // n * n, :3].reshape(n, hgt // n, n, wid // n, 3).mean(axis=(1, 3))
+
+
+@pytest.mark.parametrize("coords", ["Generated", "Object", "Normal"])
+def test_object_space_coordinates_on_a_transformed_box_agree_with_cycles(tmp_path, coords):
+    """Texture Coordinate Generated / Object / Normal on a rotated, scaled, moved box: the
+    exporter maps the core's world position/normal into the object's space per object."""
+    mat = h.node_material("Coords", "ShaderNodeBsdfDiffuse")
+    nt = mat.node_tree
+    diffuse = next(n for n in nt.nodes if n.type == "BSDF_DIFFUSE")
+    coord = nt.nodes.new("ShaderNodeTexCoord")
+    tex = _tex(nt, _image("Checker", _checker(4), "sRGB"))
+    # faces must not lie on texel edges (which texel wins there is float rounding):
+    # Generated is 0 or 1 on the faces (EXTEND keeps both sides in one texel), Object
+    # coordinates are ±(0.8, 0.55, 0.35) (×4 texels: 3.2, 2.2, 1.4)
+    tex.extension = "EXTEND" if coords == "Generated" else "REPEAT"
+    if coords == "Normal":   # the normal's components as colour: (n + 1) / 2
+        mapping = nt.nodes.new("ShaderNodeVectorMath")
+        mapping.operation = "MULTIPLY_ADD"
+        mapping.inputs[1].default_value = (0.5, 0.5, 0.5)
+        mapping.inputs[2].default_value = (0.5, 0.5, 0.5)
+        nt.links.new(coord.outputs["Normal"], mapping.inputs[0])
+        nt.links.new(mapping.outputs["Vector"], diffuse.inputs["Color"])
+    else:
+        nt.links.new(coord.outputs[coords], tex.inputs["Vector"])
+        nt.links.new(tex.outputs["Color"], diffuse.inputs["Color"])
+    box = h.box("Box", size=(1.6, 1.1, 0.7), location=(0.3, -0.2, 0.5), material=mat)
+    box.rotation_euler = (np.radians(20), np.radians(10), np.radians(35))
+    box.scale = (1.2, 0.9, 1.1)
+    h.camera(location=(2.5, -3.5, 3.0), target=(0.3, -0.2, 0.5))
+    h.world((0.6, 0.6, 0.6))
+    e, c = render_both(tmp_path, max_depth=1, samples=32, cycles_samples=64, integrator="PATH",
+                       tag=f"tex_coords_{coords}")
+    be, bc = _blocks(e), _blocks(c)
+    print("max block difference", np.abs(be - bc).max(), "block mean", bc.mean())
+    assert np.allclose(be, bc, rtol=0.06, atol=0.01)

@@ -101,6 +101,9 @@ _OUTPUTS = {
     "RGBTOBW": ("RGB_TO_BW", {"Val": "Val"}),
     "NORMAL_MAP": ("NORMAL_MAP", {"Normal": "Normal"}),
     "BUMP": ("BUMP", {"Normal": "Normal"}),
+    # compiled into MATH nodes by the exporter (not program node types of their own)
+    "MAP_RANGE": ("MATH", {"Result": "Value"}),
+    "CLAMP": ("MATH", {"Result": "Value"}),
     "LIGHT_PATH": ("LIGHT_PATH", {"Is Camera Ray": "Is Camera Ray",
                                   "Is Shadow Ray": "Is Shadow Ray"}),
 }
@@ -439,6 +442,36 @@ class _Compiler:
         if offset is None or not np.any(offset):
             return out
         return self.add(out, _vec3(offset), "V")
+
+    def math(self, op: str, a, b, clamp: bool = False):
+        return self.ref("MATH", {"Value": a, "Value_001": b, "Value_002": 0.0}, "Value",
+                        {"operation": op, "use_clamp": clamp})
+
+    def _enabled(self, node, name, ctx):
+        sock = next(s for s in node.inputs if s.name == name and getattr(s, "enabled", True))
+        return self.value(sock, ctx, "F")
+
+    def _n_map_range(self, node, out, ctx, ptype, psocket):
+        """Map Range (float, linear): to_min + f·(to_max − to_min), f = (v − from_min) /
+        (from_max − from_min) (0 when the range is empty, Cycles' safe division), f clamped
+        to [0, 1] when Clamp is on (the same as clamping the result)."""
+        if node.data_type != "FLOAT" or node.interpolation_type != "LINEAR":
+            self.note(f"Map Range '{node.name}': {node.data_type.lower()} "
+                      f"{node.interpolation_type.lower()} mapping not supported, using the input's "
+                      f"own value")
+            return None
+        v, f0, f1, t0, t1 = (self._enabled(node, n, ctx) for n in
+                             ("Value", "From Min", "From Max", "To Min", "To Max"))
+        f = self.math("DIVIDE", self.math("SUBTRACT", v, f0), self.math("SUBTRACT", f1, f0),
+                      clamp=bool(node.clamp))
+        return self.math("ADD", t0, self.math("MULTIPLY", f, self.math("SUBTRACT", t1, t0)))
+
+    def _n_clamp(self, node, out, ctx, ptype, psocket):
+        """Clamp: MINMAX min(max(v, lo), hi); RANGE the same with lo/hi sorted."""
+        v, lo, hi = (self._enabled(node, n, ctx) for n in ("Value", "Min", "Max"))
+        if node.clamp_type == "RANGE":
+            lo, hi = self.math("MINIMUM", lo, hi), self.math("MAXIMUM", lo, hi)
+        return self.math("MINIMUM", self.math("MAXIMUM", v, lo), hi)
 
     def _n_light_path(self, node, out, ctx, ptype, psocket):
         self.note(f"Light Path '{node.name}': '{out.name}' evaluated as "

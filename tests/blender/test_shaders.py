@@ -725,3 +725,38 @@ def test_group_containing_itself_warns():
     nt.links.new(node.outputs[0], diffuse.inputs["Color"])
     compiled, _, _ = _compile(mat)
     assert len(compiled.notes) == 1 and "'Loop'" in compiled.notes[0] or "cycle" in compiled.notes[0]
+
+
+def test_map_range_and_clamp_become_math_nodes():
+    """Evaluated with the core's own program evaluator against Blender's formulas."""
+    from ercuts_core.shading.program import compile_program
+
+    mat, nt, bsdf = _material("Remap", "ShaderNodeBsdfPrincipled")
+    coord, sep = nt.nodes.new("ShaderNodeTexCoord"), nt.nodes.new("ShaderNodeSeparateXYZ")
+    remap, clamp = nt.nodes.new("ShaderNodeMapRange"), nt.nodes.new("ShaderNodeClamp")
+    remap.inputs["From Min"].default_value, remap.inputs["From Max"].default_value = 0.2, 0.6
+    remap.inputs["To Min"].default_value, remap.inputs["To Max"].default_value = 1.0, 0.5
+    clamp.clamp_type = "RANGE"
+    clamp.inputs["Min"].default_value, clamp.inputs["Max"].default_value = 0.7, 0.3
+    nt.links.new(coord.outputs["UV"], sep.inputs[0])
+    nt.links.new(sep.outputs["X"], remap.inputs["Value"])
+    nt.links.new(sep.outputs["Y"], clamp.inputs["Value"])
+    nt.links.new(remap.outputs["Result"], bsdf.inputs["Roughness"])
+    nt.links.new(clamp.outputs["Result"], bsdf.inputs["Metallic"])
+    compiled, program, _ = _compile(mat)
+    assert compiled.notes == []
+    assert {n["type"] for n in program["nodes"]} == {"UVMAP", "SEPXYZ", "MATH"}
+    prog, messages = compile_program(compiled.program, "Remap", 0)
+    assert messages == []
+
+    x = np.array([0.0, 0.2, 0.4, 0.6, 0.9])
+    uv = np.stack([x, x[::-1]], axis=1)
+
+    class Ctx:  # the minimum the UVMAP/SEPXYZ/MATH nodes read
+        n = len(x)
+        uv3 = np.concatenate([uv, np.zeros((len(x), 1))], axis=1)
+
+    got = prog.evaluate(Ctx, ["roughness", "metallic"])
+    want_rough = np.clip(1.0 + (x - 0.2) / 0.4 * (0.5 - 1.0), 0.5, 1.0)
+    assert np.allclose(got["roughness"], want_rough)
+    assert np.allclose(got["metallic"], np.clip(x[::-1], 0.3, 0.7))

@@ -74,6 +74,33 @@ LIGHT_PATH         —                                             Is Camera Ray
                                                                  README; the exporter warns)
 =================  ============================================  ==========================
 
+Core semantics the exporter relies on (issue 14, core side; tests/test_shading_*.py)
+-------------------------------------------------------------------------------------
+* ``<value>`` constants: a number, or a list of 1–4 numbers (colours are RGB: a 4th
+  component is ignored). Inputs are read with Blender's implicit conversions (colour →
+  float = Rec.709 luminance, vector → float = component average, float → (f, f, f)).
+* TEX_IMAGE with no ``Vector`` input reads the active UV map. A ``texture`` row outside
+  the table renders magenta (one warning). Cubic / Smart interpolation run as Linear.
+* MIX_RGB (the pre-3.4 node: inputs Fac, Color1, Color2; params blend_type,
+  use_clamp) is accepted too. Blend modes MIX ADD MULTIPLY SUBTRACT SCREEN DIVIDE
+  DIFFERENCE EXCLUSION DARKEN LIGHTEN OVERLAY SOFT_LIGHT LINEAR_LIGHT; others → warning,
+  MIX. Unknown MATH / VECT_MATH operations → warning, ADD.
+* VALTORGB interpolation CARDINAL / B_SPLINE runs as LINEAR (EASE, CONSTANT exact).
+* NORMAL_MAP ``object_matrix`` is the object's world matrix 3×3
+  (``matrix_world.to_3x3()``); the core applies its inverse transpose. Without
+  ``MeshTable.tangents`` the tangent frame is the triangle's UV gradient ∂p/∂u.
+* TEX_COORD: the description has no object transforms, so Object = world position,
+  Normal = world shading normal, Generated = world position normalised to the object's
+  world-space bounding box (``MeshTable.object_ids``): exact for objects with an identity
+  (Object, Normal) or rotation-free (Generated) transform.
+* LIGHT_PATH: any output socket name; Is Camera Ray = 1, every other output 0.
+* ``alpha`` output: stochastic transparency for every ray (camera, bounce, shadow).
+* ``emission`` output: each triangle emits the mean of the program over 16 stratified
+  points (a per-triangle constant, so emissive textures stay importance-sampled by power;
+  detail finer than the triangles is averaged).
+* A malformed program or an unsupported node type → one warning naming material and node,
+  and the whole material uses its ``MaterialTable`` constants.
+
 Geometry the programs read comes from ``MeshTable.uvs`` ((T, 3, 2) per-corner UVs of the
 active render UV map; absent → UV (0, 0) as Cycles) and ``MeshTable.tangents`` ((T, 3, 4)
 per-corner world-space MikkTSpace tangent xyz and bitangent sign w, from Blender's

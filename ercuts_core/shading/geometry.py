@@ -49,7 +49,8 @@ class MeshShading:
         self.g1 = (d22 * inv)[:, None] * e1 - (d12 * inv)[:, None] * e2
         self.g2 = (d11 * inv)[:, None] * e2 - (d12 * inv)[:, None] * e1
         # Generated coordinates: each object's world-space bounding box
-        obj = np.asarray(object_ids, np.int64)
+        _, obj = np.unique(np.asarray(object_ids, np.int64), return_inverse=True)   # ids → 0..O−1
+        obj = obj.reshape(-1)
         n_obj = int(obj.max()) + 1 if len(obj) else 0
         lo = np.full((n_obj, 3), np.inf)
         hi = np.full((n_obj, 3), -np.inf)

@@ -91,9 +91,15 @@ def _fetch(image: F32, i: NDArray, j: NDArray, extension: str) -> NDArray:
     h, w = image.shape[:2]
     ii, in_i = _wrap(i, h, extension)
     jj, in_j = _wrap(j, w, extension)
-    out = image[ii, jj].astype(np.float64)
-    if extension == "CLIP":
-        out[~(in_i & in_j)] = 0.0
+    return _gather(image, ii, jj, in_i & in_j if extension == "CLIP" else None)
+
+
+def _gather(image: F32, ii: NDArray, jj: NDArray, inside: NDArray | None) -> NDArray:
+    """Texels at in-range (ii, jj) as (N, 4) float64 (one flat ``take``); zero where not ``inside``."""
+    w = image.shape[1]
+    out = np.take(image.reshape(-1, 4), ii * w + jj, axis=0).astype(np.float64)
+    if inside is not None:
+        out[~inside] = 0.0
     return out
 
 
@@ -123,10 +129,14 @@ def lookup(image: F32, uv: NDArray, interpolation: str = "Linear",
         x0, y0 = np.floor(x), np.floor(y)
         fx, fy = (x - x0)[:, None], (y - y0)[:, None]
         j0, i0 = x0.astype(np.int64), y0.astype(np.int64)
-        out = ((1 - fy) * ((1 - fx) * _fetch(image, i0, j0, extension)
-                           + fx * _fetch(image, i0, j0 + 1, extension))
-               + fy * ((1 - fx) * _fetch(image, i0 + 1, j0, extension)
-                       + fx * _fetch(image, i0 + 1, j0 + 1, extension)))
+        # Wrap each of the two rows and two columns once, then gather the four texels
+        (r0, in_r0), (r1, in_r1) = _wrap(i0, h, extension), _wrap(i0 + 1, h, extension)
+        (c0, in_c0), (c1, in_c1) = _wrap(j0, w, extension), _wrap(j0 + 1, w, extension)
+        clip = extension == "CLIP"
+        out = ((1 - fy) * ((1 - fx) * _gather(image, r0, c0, in_r0 & in_c0 if clip else None)
+                           + fx * _gather(image, r0, c1, in_r0 & in_c1 if clip else None))
+               + fy * ((1 - fx) * _gather(image, r1, c0, in_r1 & in_c0 if clip else None)
+                       + fx * _gather(image, r1, c1, in_r1 & in_c1 if clip else None)))
     if extension == "CLIP":
         outside = ((uv < 0.0) | (uv > 1.0)).any(axis=1)
         out[outside] = 0.0

@@ -46,10 +46,17 @@ What the compiler does
     the mean of both when both have one.
   - Anything else (Glossy, Glass, Refraction, Translucent, SSS, Toon, Hair, Volume, …):
     one note naming the node and Cycles' grey diffuse (today's policy).
-* Value nodes follow the table of ``ercuts_core.shading``; any other node (procedural
-  textures, Map Range, Clamp, …) or an unsupported output socket (Texture Coordinate
-  Camera/Window/Reflection, Light Path's other outputs) gives one note naming the node and
-  the input's own default value.
+* Value nodes follow the table of ``ercuts_core.shading``. Map Range (float, linear) and
+  Clamp are compiled into MATH nodes. Texture Coordinate Object / Generated / Normal are
+  made exact per object: the core's TEX_COORD gives the world position / normal, the
+  exporter maps them into the object's space (its matrix; Generated: its texture space;
+  Object: the node's other object if set) with DOT_PRODUCT/COMBXYZ/ADD nodes, and such
+  materials get one row per object (as object-space Normal Maps, whose ``object_matrix``
+  is the object's 3×3 world matrix). Any other node (procedural textures, attributes, …)
+  or an unsupported output socket (Texture Coordinate Camera/Window/Reflection, Light
+  Path's other outputs) gives one note naming the node and the input's own value.
+* A value linked into a shader socket is an Emission, as Cycles converts it (a float its
+  strength, a colour its colour).
 * Cycles' Image Texture outputs an associated (premultiplied) colour when its Alpha output
   is not linked (nodes.cpp: ``NODE_IMAGE_ALPHA_UNASSOCIATE`` only when Alpha is used);
   the node then reads the image's associated-alpha texture row (:mod:`.images`).

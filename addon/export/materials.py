@@ -25,6 +25,9 @@ from .shaders import output_node as output_node  # noqa: F401  (re-exported for 
 #: Cycles' default surface (objects without material, unsupported shaders): grey diffuse.
 DEFAULT_GREY = (0.8, 0.8, 0.8)
 DEFAULT_MATERIAL_NAME = "<default surface>"
+#: Rows per material for per-object nodes (scattered instances would multiply rows); beyond
+#: it, objects share the base row, whose coordinates are the core's world-space ones.
+MAX_OBJECT_VARIANTS = 256
 
 
 @dataclass
@@ -141,7 +144,8 @@ class MaterialCollector:
         self.textures = textures if textures is not None else TextureCollector()
         self.rows: list[MaterialRow] = []
         self.warnings: list[str] = []
-        self._index: dict[str, int] = {}
+        self._index: dict = {}
+        self._variants: dict[int, int] = {}
 
     def index_of(self, mat) -> int:
         """Row of ``mat`` (None → the default surface), exporting it on first use."""
@@ -185,6 +189,16 @@ class MaterialCollector:
         found = self._index.get(key)
         if found is not None:
             return found
+        count = self._variants.get(row, 0)
+        if count >= MAX_OBJECT_VARIANTS:
+            if count == MAX_OBJECT_VARIANTS:
+                self.warnings.append(
+                    f"Material '{mat.name}': more than {MAX_OBJECT_VARIANTS} objects use its "
+                    f"object-space nodes (Texture Coordinate Object/Generated/Normal, object-space "
+                    f"Normal Map); the others use world-space coordinates")
+                self._variants[row] = count + 1
+            return row
+        self._variants[row] = count + 1
         compiled = compile_material(mat, self.textures, space)  # notes: same as the base row's
         variant = dataclasses.replace(self.rows[row], **compiled.constants, program=compiled.program,
                                       needs_object_matrix=False)

@@ -760,3 +760,20 @@ def test_map_range_and_clamp_become_math_nodes():
     want_rough = np.clip(1.0 + (x - 0.2) / 0.4 * (0.5 - 1.0), 0.5, 1.0)
     assert np.allclose(got["roughness"], want_rough)
     assert np.allclose(got["metallic"], np.clip(x[::-1], 0.3, 0.7))
+
+
+def test_object_variants_are_capped(monkeypatch):
+    from addon.export import materials
+
+    monkeypatch.setattr(materials, "MAX_OBJECT_VARIANTS", 2)
+    mat, nt, diffuse = _material("Gen")
+    coord = nt.nodes.new("ShaderNodeTexCoord")
+    nt.links.new(coord.outputs["Generated"], diffuse.inputs["Color"])
+    h.camera()
+    for i in range(4):
+        h.plane(f"P{i}", material=mat, location=(3 * i, 0, 0))
+    exported = h.export()
+    desc = exported.description
+    assert len(set(desc.mesh.material_ids.tolist())) == 3          # 2 variants + the base row
+    capped = [w for w in exported.warnings if "more than 2 objects" in w]
+    assert len(capped) == 1 and "'Gen'" in capped[0]

@@ -125,11 +125,15 @@ class LightSet:
         tri_p: (T, 3, 3) float64 triangle vertices (the built scene's geometry).
         tri_ng: (T, 3) unit geometric normals; tri_area: (T,) areas [m²].
         tri_emission: (T, 3) per-triangle radiance overriding the materials' constants
-            (textured emission, :meth:`ercuts_core.shading.materials.SceneShading.triangle_emission`).
+            (textured emission, :meth:`ercuts_core.shading.materials.SceneShading.triangle_emission`):
+            the *mean* radiance, used for the power-based light choice.
+        emission_at: callable (triangles (N,), points (N, 3)) → (N, 3) radiance at points of
+            triangles whose emission is textured (``tri_textured`` (T,) bool); hits, light
+            samples and emitted subpaths use it, so textured emitters are exact per point.
     """
 
     def __init__(self, desc: SceneDescription, tri_p: NDArray, tri_ng: NDArray, tri_area: NDArray,
-                 tri_emission: NDArray | None = None):
+                 tri_emission: NDArray | None = None, emission_at=None, tri_textured: NDArray | None = None):
         self._init_bounds(tri_p)
         pl, sl, al = desc.point_lights, desc.sun_lights, desc.area_lights
         em = desc.materials.emission[desc.mesh.material_ids].astype(np.float64) \
@@ -158,6 +162,11 @@ class LightSet:
         self.tri_n = tri_ng[self.emissive_tris]
         self.tri_area = tri_area[self.emissive_tris]
         self.tri_L = em[self.emissive_tris]
+        self.emission_at = emission_at
+        self.tri_textured = (np.zeros(len(self.emissive_tris), bool) if tri_textured is None
+                             else np.asarray(tri_textured, bool)[self.emissive_tris])
+        if not self.tri_textured.any():
+            self.emission_at = None
         self.env_L = desc.world_radiance.astype(np.float64)
         has_env = luminance(self.env_L) > 0
         # Global light table: kind and index within its kind.
@@ -223,6 +232,16 @@ class LightSet:
         ab = np.where(self.ar_ellipse[i][:, None], disk, sq)
         return self.ar_c[i] + ab[:, :1] * self.ar_u[i] + ab[:, 1:] * self.ar_v[i]
 
+    def tri_radiance_at(self, i: NDArray, p: NDArray) -> NDArray:
+        """(N, 3) radiance of emissive triangles ``i`` (local indices) at points p (N, 3):
+        ``tri_L`` unless the triangle's emission is textured (then evaluated at p)."""
+        L = self.tri_L[i]
+        if self.emission_at is not None and len(i):
+            t = self.tri_textured[i]
+            if t.any():
+                L[t] = self.emission_at(self.tri_index[i[t]], p[t])
+        return L
+
     def _tri_point(self, i: NDArray, u: NDArray) -> NDArray:
         b = sample_uniform_triangle(u)
         return np.einsum("nk,nkj->nj", b, self.tri_p[i])
@@ -268,7 +287,7 @@ class LightSet:
                 i = loc[m]
                 p[m] = point(i, u[m])
                 nl[m] = normal[i]
-                Lsurf[m] = radiance[i]
+                Lsurf[m] = radiance[i] if surface_kind == AREA else self.tri_radiance_at(i, p[m])
                 pdf_area[m] = 1.0 / area[i]
         m = kind == ENV
         if m.any():
@@ -297,12 +316,16 @@ class LightSet:
         return LightSample(Li, wi, dist, pdf_w, is_delta, light, p, nl, pdf_area * sel, pdf_dir, valid)
 
     # ------------------------------------------------------------ hits on emitters
-    def tri_radiance(self, prim: NDArray) -> NDArray:
-        """(N, 3) emitted radiance of triangles ``prim`` toward any side (two-sided)."""
+    def tri_radiance(self, prim: NDArray, p: NDArray | None = None) -> NDArray:
+        """(N, 3) emitted radiance of triangles ``prim`` toward any side (two-sided), at the
+        hit points ``p`` (N, 3) (needed only for textured emission; None: the mean)."""
         out = np.zeros((len(prim), 3))
         light = self.tri_light[prim]
         m = light >= 0
-        out[m] = self.tri_L[self.local[light[m]]]
+        if p is None:
+            out[m] = self.tri_L[self.local[light[m]]]
+        else:
+            out[m] = self.tri_radiance_at(self.local[light[m]], np.asarray(p)[m])
         return out
 
     def pdf_illuminate_tri(self, x: NDArray, prim: NDArray, p: NDArray, ng: NDArray) -> NDArray:
@@ -387,7 +410,7 @@ class LightSet:
                 it = i[~area_m]
                 pa[~area_m] = self._tri_point(it, u_pos[m][~area_m])
                 na[~area_m] = self.tri_n[it]
-                La[~area_m] = self.tri_L[it]
+                La[~area_m] = self.tri_radiance_at(it, pa[~area_m])
                 A[~area_m] = self.tri_area[it]
             # Two-sided triangles: u_dir[:,0] picks the side, then is rescaled.
             ud = u_dir[m].copy()

@@ -76,7 +76,9 @@ class BuiltScene:
         self.textured = self.shading.active
         tri_emission = self.shading.triangle_emission(desc.materials.emission) \
             if self.textured else None
-        self.lights = LightSet(desc, self.tri_p, self.tri_ng, self.tri_area, tri_emission)
+        self.lights = LightSet(desc, self.tri_p, self.tri_ng, self.tri_area, tri_emission,
+                               self.shading.emission_at if self.textured else None,
+                               self.shading.row_emission[self.tri_mat] if self.textured else None)
         if self.textured and self.shading.row_alpha.any():
             # Stochastic transparency for camera, bounce and shadow rays (alpha scenes only)
             self.tracer = AlphaTracer(self.tracer, self.shading.alpha, self.shading.row_alpha[self.tri_mat])
@@ -142,7 +144,7 @@ class BuiltScene:
 
     def emission(self, surf: Surface) -> NDArray:
         """(N, 3) radiance emitted by the hit triangles (two-sided; 0 for misses)."""
-        out = self.lights.tri_radiance(np.where(surf.valid, surf.prim, 0))
+        out = self.lights.tri_radiance(np.where(surf.valid, surf.prim, 0), surf.p)
         out[~surf.valid] = 0.0
         return out
 

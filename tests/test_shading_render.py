@@ -220,3 +220,20 @@ def test_alpha_cutout_casts_a_partial_shadow_and_integrators_agree():
     opaque = d.replace(materials=MaterialTable(mats.names, mats.base_color, mats.roughness, mats.metallic,
                                                mats.specular, mats.emission, ("",) * 2))
     assert _energies(opaque, "PATH", range(2), samples=16, max_depth=4).mean() < 0.97 * path.mean()
+
+
+def test_textured_emission_is_evaluated_per_hit():
+    """An emissive checker plane seen straight on: pixels show the texture × strength (not the
+    triangle's mean), for camera hits (PATH) and for light subpaths hitting the camera (BDPT)."""
+    d = textured_plane(sky=0.0)
+    m = d.materials
+    prog = json.dumps(_image_program(0, "emission", "Closest", strength=4.0))
+    d = d.replace(materials=MaterialTable(m.names, [[0.0] * 3], m.roughness, m.metallic, m.specular,
+                                          m.emission, (prog,)))
+    for integrator in ("PATH", "BDPT"):
+        img = render(d, RenderSettings(integrator=integrator, samples=8, seed=2, max_depth=2)).image
+        chroma = img[..., 2] / np.maximum(img[..., 0], 1e-9)
+        assert chroma[0, 0] == pytest.approx(1 / 3, rel=0.02), integrator     # orange texel
+        assert chroma[0, 3] == pytest.approx(1.0, rel=0.02), integrator       # grey texel
+        np.testing.assert_allclose(img[..., :3].reshape(-1, 3).mean(axis=0),
+                                   CHECKER[..., :3].mean(axis=(0, 1)) * 4.0, rtol=0.03, err_msg=integrator)

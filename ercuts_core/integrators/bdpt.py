@@ -560,8 +560,8 @@ class BDPTIntegrator(Integrator):
         env, prim = cam.at("env", k, lane), cam.at("prim", k, lane)
         Le = np.zeros((len(lane), 3))
         Le[env] = lights.env_L
-        Le[~env] = lights.tri_radiance(prim[~env])
         pt = cam.rows(k, lane)
+        Le[~env] = lights.tri_radiance(prim[~env], pt.p[~env])
         c = pt.beta * Le
         keep = np.flatnonzero(c.max(axis=1) > 0)
         lane, s, t, k, env, prim, c = lane[keep], s[keep], t[keep], k[keep], env[keep], prim[keep], c[keep]

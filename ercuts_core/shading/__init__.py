@@ -95,9 +95,9 @@ Core semantics the exporter relies on (issue 14, core side; tests/test_shading_*
   (Object, Normal) or rotation-free (Generated) transform.
 * LIGHT_PATH: any output socket name; Is Camera Ray = 1, every other output 0.
 * ``alpha`` output: stochastic transparency for every ray (camera, bounce, shadow).
-* ``emission`` output: each triangle emits the mean of the program over 16 stratified
-  points (a per-triangle constant, so emissive textures stay importance-sampled by power;
-  detail finer than the triangles is averaged).
+* ``emission`` output: evaluated per point (radiance = colour × strength, two-sided);
+  lights are chosen by each triangle's mean emission over 16 stratified points, so
+  emissive textures stay importance-sampled by power.
 * A malformed program or an unsupported node type → one warning naming material and node,
   and the whole material uses its ``MaterialTable`` constants.
 

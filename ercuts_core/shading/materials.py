@@ -1,5 +1,7 @@
 """Per-hit material parameters for the integrators: the scene's compiled programs, evaluated
-material by material over the hits (no per-hit Python loops).
+over the hits one program family at a time (materials whose programs differ only in
+constants share one evaluation, :func:`~ercuts_core.shading.program.merge`; no per-hit
+Python loops).
 
 Shading keys (how path vertices carry textured materials). Every integrator stores a
 ``mat`` integer per surface vertex next to its position p, ns and ng. :class:`SceneShading`
@@ -15,10 +17,11 @@ The normal output (normal map / bump) is applied once, when the hit is made
 (:meth:`SceneShading.shading_normals`), and travels in the vertex's ``ns``; the BSDF
 parameters are re-evaluated whenever a BSDF is built (:meth:`SceneShading.bsdf_params`).
 
-Emission programs: a triangle's emission is the mean of its program's emission over
-``EMISSION_SAMPLES`` stratified points (a per-triangle constant, the same for light
-sampling, hits and light tracing, so every integrator stays unbiased for that scene; a
-documented approximation of textured emitters finer than the triangles).
+Emission programs: the emitted radiance is evaluated at each point (hits, light samples,
+emitted subpaths: :meth:`SceneShading.emission_at`); the light *choice* by power uses each
+triangle's mean over ``EMISSION_SAMPLES``² stratified points
+(:meth:`SceneShading.triangle_emission`), which only changes the variance. A triangle whose
+mean is 0 is not an emitter.
 """
 from __future__ import annotations
 
@@ -167,6 +170,17 @@ class SceneShading:
             ng = self.tri_ng[prim[lanes]]
             ctx = self.mesh.context(prim[lanes], b[lanes], ng, ng, lane_row)
             out[lanes] = np.clip(program.evaluate(ctx, ["alpha"])["alpha"], 0.0, 1.0)
+        return out
+
+    def emission_at(self, prim: NDArray, p: NDArray) -> NDArray:
+        """(N, 3) emitted radiance of emission programs at points p (N, 3) on triangles prim."""
+        out = np.zeros((len(prim), 3))
+        rows = self.tri_mat[prim]
+        b = self.mesh.barycentrics(prim, p)
+        ng = self.tri_ng[prim]
+        for program, lanes, lane_row in self._by_family(rows, self.row_emission[rows]):
+            ctx = self.mesh.context(prim[lanes], b[lanes], ng[lanes], ng[lanes], lane_row)
+            out[lanes] = np.maximum(program.evaluate(ctx, ["emission"])["emission"], 0.0)
         return out
 
     def triangle_emission(self, emission: NDArray) -> NDArray:

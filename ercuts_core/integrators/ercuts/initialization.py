@@ -124,7 +124,7 @@ def _emitter_seeds(scene, base, lanes, surf, d, beta, prev_pdf, depth, out_paths
         lt = lights.tri_light[surf.prim[h]]
         em = lt >= 0
         h = h[em]
-        Le[h] = lights.tri_radiance(surf.prim[h])
+        Le[h] = lights.tri_radiance(surf.prim[h], surf.p[h])
         light[h] = lt[em]
         prev = base.p[lanes[h], depth - 1]
         pdf_l[h] = lights.pdf_illuminate_tri(prev, surf.prim[h], surf.p[h], surf.ng[h])

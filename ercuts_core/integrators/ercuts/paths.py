@@ -184,7 +184,7 @@ def _emitted(scene: BuiltScene, paths: PathBatch, rows: NDArray, w_out: NDArray)
         out[m] = lights.ar_L[loc[m]] * facing[:, None]
     m = kind == TRI
     if m.any():
-        out[m] = lights.tri_L[loc[m]]
+        out[m] = lights.tri_radiance_at(loc[m], slot_rows(paths.p, rows[m], paths.k[rows[m]]))
     m = kind == POINT
     if m.any():
         out[m] = lights.pt_I[loc[m]] * lights.spot_factor(loc[m], w_out[m])[:, None]

@@ -78,9 +78,6 @@ def _skip_unless_textured(q):
         pytest.skip("the core does not evaluate shading programs yet (uniform image)")
 
 
-@pytest.mark.xfail(reason="the core averages textured emission over each triangle "
-                          "(ercuts_core.shading.materials, EMISSION_SAMPLES): a documented gap",
-                   strict=False)
 def test_textured_emission_matches_texels_and_cycles(tmp_path):
     _scene("ShaderNodeEmission")
     ercuts, cycles = render_both(tmp_path, max_depth=1, samples=4, cycles_samples=4,

@@ -139,6 +139,49 @@ def corner_normals(mesh):
     return n.reshape(-1, 3)
 
 
+def uv_layer_corners(layer, n_loops: int):
+    """(n_loops, 2) float32 UV of every face corner of a ``MeshUVLoopLayer``.
+
+    3.5+: ``layer.uv[i].vector``; before: ``layer.data[i].uv`` (both read with foreach_get).
+    """
+    import numpy as np
+
+    out = np.empty(n_loops * 2, np.float32)
+    if n_loops:
+        if hasattr(layer, "uv"):
+            layer.uv.foreach_get("vector", out)
+        else:
+            layer.data.foreach_get("uv", out)
+    return out.reshape(-1, 2)
+
+
+def active_render_uv_layer(mesh):
+    """The UV map Cycles uses by default (``active_render``), or None when the mesh has none."""
+    layers = mesh.uv_layers
+    for layer in layers:
+        if layer.active_render:
+            return layer
+    return layers.active if len(layers) else None
+
+
+def corner_tangents(mesh, uv_name: str):
+    """(n_loops, 4) float32 MikkTSpace tangent xyz + bitangent sign (``calc_tangents``,
+    same API on 3.4 and 5.0). Raises RuntimeError (e.g. faces with more than 4 corners)."""
+    import numpy as np
+
+    mesh.calc_tangents(uvmap=uv_name)
+    try:
+        n = len(mesh.loops)
+        t = np.empty(n * 3, np.float32)
+        sign = np.empty(n, np.float32)
+        if n:
+            mesh.loops.foreach_get("tangent", t)
+            mesh.loops.foreach_get("bitangent_sign", sign)
+    finally:
+        mesh.free_tangents()
+    return np.concatenate([t.reshape(-1, 3), sign[:, None]], axis=1)
+
+
 # --------------------------------------------------------------------------- node trees
 
 def uses_nodes(idblock) -> bool:

@@ -321,6 +321,8 @@ class SceneState:
     origin: tuple = (0.0, 0.0, 0.0)
     version: int = 0
     error: str | None = None
+    #: images kept between exports (:class:`addon.export.images.TextureCollector`)
+    texture_cache: dict = dataclasses.field(default_factory=dict)
 
 
 def viewport_settings(scene):
@@ -341,7 +343,7 @@ def view_update(engine, context, depsgraph) -> None:
         compat.preload_embreex()
         from .export import export_scene
 
-        exported = export_scene(depsgraph, require_camera=False)
+        exported = export_scene(depsgraph, require_camera=False, texture_cache=state.texture_cache)
         state.description, state.error = exported.description, None
         state.origin = tuple(exported.stats.get("origin", (0.0, 0.0, 0.0)))
         for w in dict.fromkeys(exported.warnings):

@@ -17,6 +17,7 @@ import numpy as np
 
 from .camera import CameraExportError, camera_desc, render_size
 from .lights import LightCollector
+from .images import TextureCollector
 from .materials import MaterialCollector
 from .mesh import GEOMETRY_TYPES, read_mesh, transform_mesh
 from .world import world_background
@@ -76,8 +77,15 @@ def _mesh_key(ob):
     return ("OB", ob.original.name_full, ob.data.as_pointer() if ob.data is not None else 0)
 
 
+def _optional_fields(cls, **values) -> dict:
+    """The given fields that ``cls`` defines and that are not None (fields added by issue 14:
+    ``MeshTable.uvs/tangents``, ``SceneDescription.textures``)."""
+    known = {f.name for f in dataclasses.fields(cls)}
+    return {k: v for k, v in values.items() if v is not None and k in known}
+
+
 def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
-                 require_camera=True, should_stop=None) -> ExportResult:
+                 require_camera=True, should_stop=None, texture_cache=None) -> ExportResult:
     """Export the evaluated scene of ``depsgraph`` (its view layer) for the core.
 
     Args:
@@ -86,6 +94,8 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         use_border: override ``render.use_border``.
         require_camera: raise :class:`ExportError` when there is no camera (else camera=None).
         should_stop: callable polled during the export; True raises :class:`ExportCancelled`.
+        texture_cache: a dict kept between exports (the viewport's): unchanged images are
+            not read again; it is replaced by this export's images.
     """
     from ercuts_core.description import MeshTable, SceneDescription
 
@@ -119,11 +129,15 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         camera = dataclasses.replace(camera, world_from_camera=shifted)
 
     # ---------------------------------------------------------------- objects
-    materials = MaterialCollector(override=getattr(view_layer, "material_override", None))
+    textures = TextureCollector(cache=texture_cache)
+    materials = MaterialCollector(override=getattr(view_layer, "material_override", None),
+                                  textures=textures)
     lights = LightCollector()
     names: list[str] = []
     local_cache: dict = {}
-    parts = dict(positions=[], triangles=[], normals=[], smooth=[], material_ids=[], object_ids=[])
+    parts = dict(positions=[], triangles=[], normals=[], smooth=[], material_ids=[], object_ids=[],
+                 uvs=[], tangents=[])
+    mesh_warnings: list[str] = []
     n_vertices = 0
     n_instances = 0
     skipped = dict(empty_meshes=0, degenerate_transforms=0)   # silent, counted (policy §2.6)
@@ -139,15 +153,24 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
             continue
         if ob.type not in GEOMETRY_TYPES or not inst.show_self:
             continue
-        key = _mesh_key(ob)
+        # UVs and tangents only for objects whose materials read them (they cost memory).
+        slot_rows = materials.slot_table(ob, _relative(inst.matrix_world, origin), origin)
+        used_rows = [materials.rows[r] for r in np.unique(slot_rows)]
+        want_uvs = any(r.uses_uvs for r in used_rows)
+        want_tangents = any(r.uses_tangents for r in used_rows)
+        uv_maps = frozenset().union(*(r.uv_maps for r in used_rows))
+        key = (_mesh_key(ob), want_uvs, want_tangents, uv_maps)
         local = local_cache.get(key)
         if local is None:
             mesh = ob.to_mesh()
             try:
-                local = read_mesh(mesh) if mesh is not None else None
+                local = (read_mesh(mesh, want_uvs, want_tangents, uv_maps)
+                         if mesh is not None else None)
             finally:
                 ob.to_mesh_clear()
             local_cache[key] = local
+            if local is not None and local.notes:
+                mesh_warnings.append(f"Object '{ob.name}': " + "; ".join(local.notes))
         if local is None or local.n_triangles == 0:
             skipped["empty_meshes"] += 1
             continue
@@ -155,7 +178,6 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         if placed is None:
             skipped["degenerate_transforms"] += 1
             continue
-        slot_rows = materials.slot_table(ob)
         names.append(_instance_name(inst))
         n_instances += 1
         parts["positions"].append(placed.positions)
@@ -164,12 +186,23 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         parts["smooth"].append(local.smooth)
         parts["material_ids"].append(slot_rows[np.clip(local.slots, 0, len(slot_rows) - 1)])
         parts["object_ids"].append(np.full(local.n_triangles, len(names) - 1, np.int32))
+        parts["uvs"].append(placed.uvs)
+        parts["tangents"].append(placed.tangents)
         n_vertices += len(placed.positions)
 
     # ---------------------------------------------------------------- assemble
     def cat(key, tail, dtype):
         chunks = parts[key]
         return np.concatenate(chunks).astype(dtype) if chunks else np.zeros((0, *tail), dtype)
+
+    def per_corner(key, width):
+        """Concatenate per-corner arrays; objects without them get zeros (UV 0 as Cycles)."""
+        chunks = parts[key]
+        if not any(c is not None for c in chunks):
+            return None
+        return np.concatenate([
+            c if c is not None else np.zeros((len(t), 3, width), np.float32)
+            for c, t in zip(chunks, parts["triangles"])]).astype(np.float32)
 
     smooth = cat("smooth", (), bool)
     any_smooth = bool(smooth.any())
@@ -180,6 +213,7 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         object_ids=cat("object_ids", (), np.int32),
         normals=cat("normals", (3,), np.float32) if any_smooth else None,
         smooth=smooth if any_smooth else None,
+        **_optional_fields(MeshTable, uvs=per_corner("uvs", 2), tangents=per_corner("tangents", 4)),
     )
     material_table = materials.table()
     points, suns, areas = lights.tables()
@@ -189,7 +223,11 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         world = override
     radiance, world_map, world_warnings = world_background(world)
 
-    warnings += materials.warnings + lights.warnings + world_warnings
+    texture_table = textures.table() if textures.names else None
+    if texture_cache is not None:
+        texture_cache.clear()
+        texture_cache.update(textures.cache_out)
+    warnings += materials.warnings + textures.warnings + mesh_warnings + lights.warnings + world_warnings
     if scene.render.use_motion_blur:
         warnings.append("motion blur ignored")
 
@@ -201,6 +239,7 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         mesh=mesh_table, materials=material_table, camera=camera,
         point_lights=points, sun_lights=suns, area_lights=areas,
         world_radiance=radiance, object_names=tuple(names),
+        **_optional_fields(SceneDescription, textures=texture_table),
     )
     if world_map is not None:                            # an HDRI replaces world_radiance
         desc = desc.replace(world_map=world_map)
@@ -210,5 +249,7 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         stats=dict(triangles=mesh_table.n_triangles, instances=n_instances,
                    meshes=sum(v is not None for v in local_cache.values()),
                    lights=len(points) + len(suns) + len(areas), **skipped,
+                   textures=len(textures.names), texture_bytes=textures.nbytes,
+                   texture_reads=textures.reads,
                    origin=tuple(float(x) for x in origin)),
     )

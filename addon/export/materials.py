@@ -1,25 +1,33 @@
 """Blender materials → rows of the core's ``MaterialTable``.
 
-Supported surface shaders, with socket names of both Blender 3.x and 4.x/5.x
-(``compat.principled_input``): Principled BSDF (base colour, roughness, metallic,
-specular, emission colour × strength), Diffuse BSDF and Emission. Inputs may be
-constant or linked to an RGB/Value node (through reroutes). Anything else (other
-shader nodes, textures, groups) gives *one* warning naming the material, and a
-fallback: the socket's own value for a linked input, grey diffuse for an unsupported
-shader. Materials without a node tree render their viewport colour as a diffuse,
-like Cycles; objects without a material get Cycles' default grey diffuse.
+Each material's node tree is compiled by :mod:`.shaders` into the row's constants plus a
+shading program (``MaterialTable.programs``; "" when the constants say everything, so
+scenes with constant materials export exactly as before issue 14). Images the programs
+read go to the scene's texture table (:mod:`.images`). Everything that cannot be
+translated gives *one* warning per material naming the nodes, and the documented fallback
+(the input's own value for an unsupported value node, grey diffuse for an unsupported
+shader). Materials without a node tree render their viewport colour as a diffuse, like
+Cycles; objects without a material get Cycles' default grey diffuse. Materials with an
+object-space Normal Map get one row per object matrix.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .. import compat
+from .images import TextureCollector
+from .shaders import ObjectSpace, compile_material
+from .shaders import output_node as output_node  # noqa: F401  (re-exported for lights/world)
 
 #: Cycles' default surface (objects without material, unsupported shaders): grey diffuse.
 DEFAULT_GREY = (0.8, 0.8, 0.8)
 DEFAULT_MATERIAL_NAME = "<default surface>"
+#: Rows per material for per-object nodes (scattered instances would multiply rows); beyond
+#: it, objects share the base row, whose coordinates are the core's world-space ones.
+MAX_OBJECT_VARIANTS = 256
 
 
 @dataclass
@@ -32,6 +40,14 @@ class MaterialRow:
     metallic: float = 0.0
     specular: float = 0.0
     emission: tuple = (0.0, 0.0, 0.0)
+    #: shading program (JSON, ``ercuts_core.shading``); "" = the constants above
+    program: str = ""
+    uses_uvs: bool = False
+    uses_tangents: bool = False
+    uv_maps: frozenset = frozenset()
+
+    #: an object-space Normal Map: one row per object matrix (``MaterialCollector``)
+    needs_object_matrix: bool = False
 
     @property
     def is_emissive(self) -> bool:
@@ -95,79 +111,41 @@ def follow_link(socket):
     return None, None
 
 
-def output_node(node_tree):
-    """The active output node Cycles would use (``get_output_node`` exists on 3.x and 5.x)."""
-    return node_tree.get_output_node("CYCLES") or node_tree.get_output_node("ALL")
+def _texspace(obj) -> tuple:
+    """(location, size) of the object's texture space (Blender's Generated coordinates);
+    the unit box when its data has none."""
+    data = getattr(obj, "data", None)
+    loc = getattr(data, "texspace_location", None)
+    size = getattr(data, "texspace_size", None)
+    if loc is None or size is None:
+        return (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)
+    return tuple(loc), tuple(size)
 
 
-def read_material(mat) -> tuple[MaterialRow, list[str]]:
-    """One material's row, and the list of things that could not be translated."""
-    reader = _Reader(mat.name)
+def read_material(mat, textures=None) -> tuple[MaterialRow, list[str]]:
+    """One material's row (with its shading program), and the list of things that could
+    not be translated. ``textures``: the scene's :class:`.images.TextureCollector`."""
     if not compat.uses_nodes(mat):
         row = MaterialRow(mat.name, base_color=tuple(float(c) for c in mat.diffuse_color[:3]))
-        return row, reader.notes
-    out = output_node(mat.node_tree)
-    if out is None:
-        reader.note("no material output node")
-        return MaterialRow(mat.name, base_color=(0.0, 0.0, 0.0)), reader.notes
-    surface, _ = follow_link(out.inputs.get("Surface"))
-    if surface is None:  # nothing connected: Cycles renders black
-        return MaterialRow(mat.name, base_color=(0.0, 0.0, 0.0)), reader.notes
-    kind = surface.bl_idname
-    if kind == "ShaderNodeBsdfPrincipled":
-        row = _principled(surface, reader)
-    elif kind == "ShaderNodeBsdfDiffuse":
-        row = MaterialRow(mat.name, base_color=reader.color(surface.inputs.get("Color")))
-        if reader.scalar(surface.inputs.get("Roughness")) > 0.0:
-            reader.note("Diffuse BSDF roughness (Oren-Nayar) ignored, rendered as Lambert")
-    elif kind == "ShaderNodeEmission":
-        color = np.array(reader.color(surface.inputs.get("Color"), (1.0, 1.0, 1.0)))
-        strength = reader.scalar(surface.inputs.get("Strength"), 1.0)
-        row = MaterialRow(mat.name, base_color=(0.0, 0.0, 0.0), specular=0.0,
-                          emission=tuple(color * strength))
-    else:
-        reader.note(f"unsupported shader '{surface.name}' ({kind}), rendered as grey diffuse")
-        row = MaterialRow(mat.name)
-    row.name = mat.name
-    return row, reader.notes
-
-
-def _principled(node, reader: _Reader) -> MaterialRow:
-    get = lambda concept: compat.principled_input(node, concept)  # noqa: E731
-    base = reader.color(get("base_color"))
-    roughness = reader.scalar(get("roughness"), 0.5)
-    metallic = reader.scalar(get("metallic"), 0.0)
-    specular = compat.principled_specular(reader.scalar(get("specular"), 0.5),
-                                          reader.scalar(get("ior"), 1.5))
-    e_color = np.array(reader.color(get("emission_color"), (0.0, 0.0, 0.0)))
-    e_strength = reader.scalar(get("emission_strength"), 1.0)
-    for concept, label in (("transmission", "transmission"), ("coat", "coat"),
-                           ("sheen", "sheen"), ("subsurface", "subsurface")):
-        if reader.scalar(get(concept), 0.0) > 0.0:
-            reader.note(f"Principled {label} ignored")
-    if reader.scalar(get("alpha"), 1.0) < 1.0:
-        reader.note("Principled alpha ignored (rendered opaque)")
-    normal = get("normal")
-    if normal is not None and normal.is_linked:
-        reader.note("normal/bump input ignored")
-    return MaterialRow(
-        name=reader.name,
-        base_color=tuple(np.clip(base, 0.0, 1.0)),
-        roughness=float(np.clip(roughness, 0.0, 1.0)),
-        metallic=float(np.clip(metallic, 0.0, 1.0)),
-        specular=max(specular, 0.0),
-        emission=tuple(np.maximum(e_color * e_strength, 0.0)),
-    )
+        return row, []
+    compiled = compile_material(mat, textures)
+    row = MaterialRow(mat.name, **compiled.constants, program=compiled.program,
+                      uses_uvs=compiled.uses_uvs, uses_tangents=compiled.uses_tangents,
+                      uv_maps=frozenset(compiled.uv_maps),
+                      needs_object_matrix=compiled.needs_object_matrix)
+    return row, compiled.notes
 
 
 class MaterialCollector:
     """Builds the scene's material table: one row per distinct Blender material."""
 
-    def __init__(self, override=None):
+    def __init__(self, override=None, textures: TextureCollector | None = None):
         self.override = override
+        self.textures = textures if textures is not None else TextureCollector()
         self.rows: list[MaterialRow] = []
         self.warnings: list[str] = []
-        self._index: dict[str, int] = {}
+        self._index: dict = {}
+        self._variants: dict[int, int] = {}
 
     def index_of(self, mat) -> int:
         """Row of ``mat`` (None → the default surface), exporting it on first use."""
@@ -180,19 +158,53 @@ class MaterialCollector:
         if mat is None:
             material = MaterialRow(DEFAULT_MATERIAL_NAME)
         else:
-            material, notes = read_material(mat)
+            material, notes = read_material(mat, self.textures)
             if notes:
                 self.warnings.append(f"Material '{mat.name}': " + "; ".join(notes))
         self._index[key] = len(self.rows)
         self.rows.append(material)
         return self._index[key]
 
-    def slot_table(self, obj) -> np.ndarray:
-        """int32 array mapping each material slot of ``obj`` to a row (at least one entry)."""
-        slots = [self.index_of(slot.material) for slot in obj.material_slots]
-        if not slots:
-            slots = [self.index_of(None)]
+    def slot_table(self, obj, world_from_object=None, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """int32 array mapping each material slot of ``obj`` to a row (at least one entry).
+
+        Materials with per-object nodes (Texture Coordinate Object/Generated/Normal,
+        object-space Normal Map) get one row per object matrix and texture space
+        (``world_from_object``: 4×4 in description coordinates, ``origin``: the
+        description's origin), compiled again with that :class:`.shaders.ObjectSpace`.
+        """
+        mats = [slot.material for slot in obj.material_slots] or [None]
+        slots = [self.index_of(m) for m in mats]
+        if world_from_object is not None:
+            space = None
+            for i, (m, r) in enumerate(zip(mats, slots)):
+                if self.rows[r].needs_object_matrix:
+                    space = space or ObjectSpace(world_from_object, *_texspace(obj), origin)
+                    slots[i] = self._object_variant(r, self.override or m, space)
         return np.asarray(slots, np.int32)
+
+    def _object_variant(self, row: int, mat, space: ObjectSpace) -> int:
+        """The row of material ``mat`` (base row ``row``) compiled for one object."""
+        key = ("OBJ", row, space.key())
+        found = self._index.get(key)
+        if found is not None:
+            return found
+        count = self._variants.get(row, 0)
+        if count >= MAX_OBJECT_VARIANTS:
+            if count == MAX_OBJECT_VARIANTS:
+                self.warnings.append(
+                    f"Material '{mat.name}': more than {MAX_OBJECT_VARIANTS} objects use its "
+                    f"object-space nodes (Texture Coordinate Object/Generated/Normal, object-space "
+                    f"Normal Map); the others use world-space coordinates")
+                self._variants[row] = count + 1
+            return row
+        self._variants[row] = count + 1
+        compiled = compile_material(mat, self.textures, space)  # notes: same as the base row's
+        variant = dataclasses.replace(self.rows[row], **compiled.constants, program=compiled.program,
+                                      needs_object_matrix=False)
+        self._index[key] = len(self.rows)
+        self.rows.append(variant)
+        return self._index[key]
 
     def table(self):
         from ercuts_core.description import MaterialTable
@@ -205,4 +217,5 @@ class MaterialCollector:
             metallic=np.array([r.metallic for r in rows], np.float32),
             specular=np.array([r.specular for r in rows], np.float32),
             emission=np.array([r.emission for r in rows], np.float32).reshape(-1, 3),
+            programs=tuple(r.program for r in rows),
         )

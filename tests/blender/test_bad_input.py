@@ -234,7 +234,8 @@ def test_unsupported_node_warns_once_and_falls_back_to_grey(tmp_path):
     assert img[..., :3].mean() > 0
 
 
-def test_missing_image_texture_warns_and_uses_the_socket_value(tmp_path):
+def test_missing_image_texture_warns_and_renders_magenta(tmp_path):
+    """Like Cycles: a missing image renders magenta; one warning names image and material."""
     mat = bh.node_material("Textured", "ShaderNodeBsdfDiffuse", Color=(0.2, 0.6, 0.2))
     tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
     img = bpy.data.images.new("Missing", 4, 4)
@@ -245,9 +246,10 @@ def test_missing_image_texture_warns_and_uses_the_socket_value(tmp_path):
     mat.node_tree.links.new(tex.outputs["Color"], diffuse.inputs["Color"])
     lit_scene(material=mat)
     img = render(tmp_path)
-    assert len(warnings()) == 1 and "Textured" in warnings()[0], warnings()
+    missing = [w for w in warnings() if "'Missing'" in w]
+    assert len(missing) == 1 and "'Textured'" in missing[0], warnings()
     rgb = img[..., :3].reshape(-1, 3).mean(axis=0)
-    assert rgb[1] > 2 * rgb[0], rgb
+    assert rgb[0] > 2 * rgb[1] and rgb[2] > 2 * rgb[1], rgb
 
 
 # --------------------------------------------------------------------------- libraries

@@ -217,12 +217,19 @@ def plan(n_pixels: int, n_triangles: int, settings: RenderSettings, shading_byte
 #: (float64 copies of the per-corner attributes, the UV frame and the barycentric duals).
 UV_TRIANGLE_BYTES = 3 * 2 * 8 + 3 * 8 + 2 * 8 + 2 * 3 * 8 + 2 * 3 * 8
 TANGENT_TRIANGLE_BYTES = 3 * 4 * 8
+#: Environment map per texel beyond the description's float32 RGB: the sampling tables of
+#: :class:`~ercuts_core.envmap.EnvMap` (float32 cell pdf, one float64 cdf table, temporaries).
+ENV_TEXEL_BYTES = 24
 
 
 def shading_bytes(desc) -> int:
-    """Memory of a description's textures (float32, held once) and shading attributes."""
+    """Memory of a description's textures (float32, held once), shading attributes and
+    environment map (with its sampling tables)."""
     mesh = desc.mesh
     total = desc.textures.nbytes
+    if getattr(desc, "world_map", None) is not None:
+        rad = desc.world_map.radiance
+        total += rad.nbytes + rad.shape[0] * rad.shape[1] * ENV_TEXEL_BYTES
     if mesh.uvs is not None:
         total += mesh.uvs.nbytes + mesh.n_triangles * UV_TRIANGLE_BYTES
     if mesh.tangents is not None:

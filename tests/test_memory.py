@@ -70,3 +70,16 @@ def test_tight_budget_still_renders_with_smaller_batches():
     r = render(desc, s)
     assert r.stats["memory_estimate_mb"] <= budget and np.isfinite(r.image).all()
     assert r.image[..., :3].mean() > 0
+
+
+def test_environment_map_counts_in_the_plan():
+    """An HDRI world (its texels and sampling tables) is part of the estimate."""
+    from ercuts_core.description import WorldMap
+    from ercuts_core.memory import ENV_TEXEL_BYTES
+
+    desc = scenes.cornell_box(32, 24)
+    h, w = 512, 1024
+    with_map = desc.replace(world_map=WorldMap(np.ones((h, w, 3), np.float32), np.eye(3, dtype=np.float32)))
+    s = RenderSettings(integrator="PATH", memory_budget_mb=0)
+    grown = plan_for(with_map, s).total - plan_for(desc, s).total
+    assert grown == h * w * (12 + ENV_TEXEL_BYTES)

@@ -139,7 +139,7 @@ def black_world():
     bpy.context.scene.world = world
 
 
-def render_settings(width, height, max_depth=8):
+def render_settings(width, height, max_depth=64):
     """Resolution, engine (ERCUTS when registered; scene.ercuts at its defaults), and Cycles
     set up to match (``max_depth`` = the add-on's default max_depth)."""
     s = bpy.context.scene

@@ -273,20 +273,6 @@ def area_light_radiance_scale(light, area: float) -> float:
     return 1.0 / (4.0 * area)
 
 
-#: Byte-image colour spaces whose ``Image.pixels`` are sRGB-encoded: "sRGB" in 3.x–5.x
-#: (3.x also has "Filmic sRGB" as a view, never as an image colour space). Linear ones
-#: are "Linear" (3.x) / "Linear Rec.709" (4.x+), "Non-Color", "Raw" (3.x).
-_SRGB_IMAGE_SPACES = {"sRGB"}
-
-
-def image_needs_srgb_decode(image) -> bool:
-    """True when ``image.pixels`` hold sRGB-encoded values to be linearised: byte images in
-    the sRGB colour space. Float images (EXR, HDR, float generated) are scene-linear."""
-    if getattr(image, "is_float", False):
-        return False
-    return image.colorspace_settings.name in _SRGB_IMAGE_SPACES
-
-
 def world_override(view_layer):
     """``view_layer.world_override`` (5.0) or None (3.x has none)."""
     return getattr(view_layer, "world_override", None)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import compat
+from .images import read_image
 from .materials import _Reader, follow_link, output_node
 
 #: Cycles' colour for a missing texture (TEX_IMAGE_MISSING_R/G/B).
@@ -74,13 +75,6 @@ def world_background(world):
 
 # --------------------------------------------------------------------------- environment texture
 
-def srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    """sRGB-encoded values in [0, 1] → linear (IEC 61966-2-1 piecewise transfer function)."""
-    c = np.asarray(c, np.float32)
-    curve = ((np.maximum(c, 0.04045) + 0.055) / 1.055) ** 2.4
-    return np.where(c <= 0.04045, c / 12.92, curve).astype(np.float32)
-
-
 def _environment(tex, strength, reader: _Reader, fallback):
     """(mean radiance (3,), WorldMap or None) of an Environment Texture node × ``strength``."""
     from ercuts_core.description import WorldMap
@@ -91,7 +85,7 @@ def _environment(tex, strength, reader: _Reader, fallback):
         return np.array(fallback, np.float32) * strength, None
     if getattr(tex, "interpolation", "Linear") != "Linear":
         reader.note(f"environment interpolation '{tex.interpolation}' rendered as Linear")
-    pixels = image_pixels(tex.image)
+    pixels = image_pixels(tex.image, reader)
     if pixels is None:
         name = tex.image.name if tex.image is not None else "<none>"
         reader.note(f"environment image '{name}' is missing or empty, rendered magenta")
@@ -109,29 +103,20 @@ def _environment(tex, strength, reader: _Reader, fallback):
     return mean.astype(np.float32), WorldMap(radiance, rotation)
 
 
-def image_pixels(image) -> np.ndarray | None:
-    """(H, W, 3) float32 linear RGB of a Blender image (bottom row first), or None when it
-    has no pixels (no image, missing file)."""
+def image_pixels(image, reader: _Reader) -> np.ndarray | None:
+    """(H, W, 3) float32 linear RGB of a Blender image (bottom row first), read by the
+    texture table's :func:`~.images.read_image`, alpha ignored: the stored colour (float
+    images keep their stored, associated values; byte images their straight colour), or
+    None when it has no pixels."""
     if image is None:
         return None
-    try:
-        w, h = (int(s) for s in image.size)
-        n = len(image.pixels)
-    except (RuntimeError, ReferenceError):
+    straight, associated, notes = read_image(image)
+    for note in notes:
+        reader.note(f"environment image '{image.name}': {note}")
+    if straight is None:
         return None
-    if w * h == 0 or n == 0:
-        return None
-    channels = n // (w * h)
-    buf = np.empty(n, np.float32)
-    image.pixels.foreach_get(buf)
-    px = buf.reshape(h, w, channels)
-    if channels >= 3:
-        rgb = px[..., :3]
-    else:
-        rgb = np.repeat(px[..., :1], 3, axis=2)
-    if compat.image_needs_srgb_decode(image):
-        rgb = srgb_to_linear(rgb)
-    return np.ascontiguousarray(rgb, np.float32)
+    rgba = associated if associated is not None and image.is_float else straight
+    return np.ascontiguousarray(rgba[..., :3])
 
 
 def _euler_xyz(rx: float, ry: float, rz: float) -> np.ndarray:

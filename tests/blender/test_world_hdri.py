@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import blender_helpers as h
-from addon.export.world import srgb_to_linear
+from addon.export.images import srgb_to_linear
 from test_cycles_agreement import _block_z, assert_means_agree, base_scene, render_both
 
 W_MAP, H_MAP = 64, 32

@@ -440,12 +440,16 @@ def mix(inp, params, ctx):
         return {"Result": (_lerp(inp.float("A"), inp.float("B"), t[:, 0]), F)}
     if data == "VECTOR":
         return {"Result": (_lerp(inp.vec("A"), inp.vec("B"), t), V)}
-    mode = params.get("blend_type", "MIX")
-    out = _blend(mode if mode in BLEND_MODES else "MIX", t, inp.vec("A", (0.5,) * 3),
-                 inp.vec("B", (0.5,) * 3))
-    if params.get("clamp_result", False):
-        out = np.clip(out, 0.0, 1.0)
+    out = _blend_colors(params, t, inp.vec("A", (0.5,) * 3), inp.vec("B", (0.5,) * 3), "clamp_result")
     return {"Result": (out, C)}
+
+
+def _blend_colors(params, t, a, b, clamp_key: str):
+    """(N, 3) ``params['blend_type']`` of colours a, b at factor t (unknown modes: MIX),
+    clamped to [0, 1] when ``params[clamp_key]``; shared by MIX and MIX_RGB."""
+    mode = params.get("blend_type", "MIX")
+    out = _blend(mode if mode in BLEND_MODES else "MIX", t, a, b)
+    return np.clip(out, 0.0, 1.0) if params.get(clamp_key, False) else out
 
 
 def mix_rgb(inp, params, ctx):
@@ -453,11 +457,7 @@ def mix_rgb(inp, params, ctx):
     t = inp.float("Fac", 0.5)[:, None]
     if params.get("use_clamp_factor", True):
         t = np.clip(t, 0.0, 1.0)
-    mode = params.get("blend_type", "MIX")
-    out = _blend(mode if mode in BLEND_MODES else "MIX", t, inp.vec("Color1", (0.5,) * 3),
-                 inp.vec("Color2", (0.5,) * 3))
-    if params.get("use_clamp", False):
-        out = np.clip(out, 0.0, 1.0)
+    out = _blend_colors(params, t, inp.vec("Color1", (0.5,) * 3), inp.vec("Color2", (0.5,) * 3), "use_clamp")
     return {"Color": (out, C)}
 
 

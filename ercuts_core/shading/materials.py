@@ -40,15 +40,6 @@ def _compile_all(materials, n_textures: int) -> list:
             for text, name in zip(materials.programs, materials.names)]
 
 
-def program_messages(materials, n_textures: int) -> list[tuple[int, str]]:
-    """(material row, message) for every problem of every program (for validation)."""
-    out = []
-    for row, (text, name) in enumerate(zip(materials.programs, materials.names)):
-        for msg in compile_program(text, name, n_textures)[1]:
-            out.append((row, msg))
-    return out
-
-
 class SceneShading:
     """The compiled programs of a built scene.
 

@@ -285,12 +285,6 @@ class ErcutsIntegrator:
             q = len(pix) / n
         self.stats["seed_pixels"] = len(pix)
         step = min(self.memory.seed_pixels, progress_batch_pixels(s))
-        if step >= len(pix):
-            seeds, energy = self._seeds(rng, None if q == 1.0 else pix)
-            starts = chain_starts(energy / q, s.chain_length, e_d, rng)
-            self.schedule.report("ER chains", 0.1, "ER chains: seed paths 100%")
-            self.stats["seed_paths"] = len(seeds)
-            return seeds.take(starts > 0), starts[starts > 0]
         kept, counts, total = [], [], 0
         for start in range(0, len(pix), step):
             seeds, energy = self._seeds(rng, pix[start:start + step])

@@ -26,6 +26,9 @@ GATHER_ITEMS = (
     ("LIGHTCUTS", "Lightcuts", "Gather the virtual point lights through the light tree (lightcuts)", 0),
     ("BRUTE_FORCE", "Brute Force", "Gather every virtual point light at every shading point "
      "(slow; shows what the light tree saves)", 1),
+    ("STOCHASTIC", "Stochastic Lightcuts", "A cut of at most Stochastic Cut Size nodes, one "
+     "virtual point light drawn per node and shading point (Yuksel 2019): unbiased noise that "
+     "iterations average away instead of a 2 % bound; cost independent of the light count", 2),
 )
 SEEDING_ITEMS = (
     ("BDPT", "Bidirectional", "Seed the chains from bidirectional paths (the paper)", 0),
@@ -206,6 +209,12 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         name="Max Cut Size",
         description="Largest lightcut (number of light-tree nodes) evaluated per shading point",
         default=_default("max_cut_size", 1000), min=1, soft_max=100000,
+    )
+    stochastic_cut_size: IntProperty(
+        name="Stochastic Cut Size",
+        description=("Light-tree nodes per shading point of the Stochastic Lightcuts gather, "
+                     "each evaluated with one virtual point light drawn for the point"),
+        default=_default("stochastic_cut_size", 32), min=1, soft_max=1024,
     )
     clamp: FloatProperty(
         name="VPL Clamp",

@@ -11,7 +11,7 @@ import os
 from dataclasses import dataclass, fields
 
 INTEGRATORS = ("ERCUTS", "BDPT", "PATH")
-GATHERS = ("LIGHTCUTS", "BRUTE_FORCE")
+GATHERS = ("LIGHTCUTS", "STOCHASTIC", "BRUTE_FORCE")
 SEEDINGS = ("BDPT", "PATH")
 DIRECT_LIGHTS = ("NEE", "VPL")
 LIGHTCUT_ERRORS = ("NODE", "TOTAL", "LITERAL")
@@ -77,8 +77,13 @@ class RenderSettings:
         max_cut_size: largest lightcut per shading point.
         clamp: VPL geometry clamp as a minimum distance, a fraction of the scene's bounding
             diagonal (cosθ/d² ≤ 1/(clamp·diagonal)²); 0 = off. The removed energy is reported.
-        gather: 'LIGHTCUTS' (the light tree) or 'BRUTE_FORCE' (every VPL at every shading
-            point: the ablation that shows the tree's role).
+        stochastic_cut_size: nodes per shading point of the 'STOCHASTIC' gather.
+        gather: 'LIGHTCUTS' (the light tree, the paper's bounded cuts), 'STOCHASTIC'
+            (stochastic lightcuts, Yuksel 2019: a cut of ``stochastic_cut_size`` nodes, each
+            evaluated with one VPL drawn per shading point; unbiased for the VPLs, no error
+            bound: :mod:`~ercuts_core.integrators.ercuts.stochastic_lightcuts`) or
+            'BRUTE_FORCE' (every VPL at every shading point: the ablation that shows the
+            tree's role).
         lightcut_error: the lightcut stopping rule (:func:`~ercuts_core.integrators.ercuts.
             lightcuts.lightcut`): 'NODE' refines while some cut node's error bound exceeds
             ``max_error`` of the estimate (Walter et al. 2005's practice; an ablation);
@@ -127,6 +132,7 @@ class RenderSettings:
     multichain_perturbation: bool = True
     bidirectional_mutation: bool = True
     max_cut_size: int = 1000
+    stochastic_cut_size: int = 32
     clamp: float = 0.02
     gather: str = "LIGHTCUTS"
     lightcut_error: str = "TOTAL"
@@ -168,8 +174,8 @@ class RenderSettings:
             raise ValueError(f"iterations must be >= 0 (0 = until the time limit), got {self.iterations}")
         if self.chains_per_pixel <= 0 or self.chain_length < 1 or self.max_chains < 1:
             raise ValueError("chains_per_pixel and max_chains must be > 0 and chain_length >= 1")
-        if min(self.max_cut_size, self.shading_samples, self.e1_samples, self.direct_samples) < 1:
-            raise ValueError("max_cut_size, shading_samples, e1_samples and direct_samples must be >= 1")
+        if min(self.max_cut_size, self.stochastic_cut_size, self.shading_samples, self.e1_samples, self.direct_samples) < 1:
+            raise ValueError("max_cut_size, stochastic_cut_size, shading_samples, e1_samples and direct_samples must be >= 1")
         if self.clamp < 0:
             raise ValueError(f"clamp must be >= 0, got {self.clamp}")
         if self.memory_budget_mb < 0:

@@ -19,6 +19,7 @@ from ...scene import BuiltScene
 from ...settings import RenderSettings
 from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
 from .pacing import GatherPace, Schedule
+from .stochastic_lightcuts import stochastic_lightcut
 from .vpl import GBuffer
 
 #: Absolute lightcut error floor as a fraction of max_error × the mean pixel luminance.
@@ -119,11 +120,17 @@ class Gather:
             idx = pts_all[start:stop]
             t_batch = time.perf_counter()
             pts = self._shading_points(idx, f_bound)
-            if s.gather == "LIGHTCUTS":
-                res = lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
-                               max_error=pace.error, max_cut_size=pace.cap, clamp=clamp,
-                               abs_floor=floor, error_mode=ERROR_MODES[s.lightcut_error],
-                               return_cut=True, on_round=lambda: report(start))
+            if s.gather in ("LIGHTCUTS", "STOCHASTIC"):
+                if s.gather == "STOCHASTIC":
+                    rng = np.random.default_rng([s.seed, 0x5C7, start])
+                    res = stochastic_lightcut(tree, vpls.position, vpls.normal, vpls.intensity,
+                                              pts, rng, cut_size=min(pace.cap, s.stochastic_cut_size),
+                                              clamp=clamp)
+                else:
+                    res = lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
+                                   max_error=pace.error, max_cut_size=pace.cap, clamp=clamp,
+                                   abs_floor=floor, error_mode=ERROR_MODES[s.lightcut_error],
+                                   return_cut=True, on_round=lambda: report(start))
                 em = _sum_rows(res.cut_point, res.cut_estimate * share[res.cut_node], len(idx))
                 L[0, idx], L[1, idx], cut[idx] = em, res.radiance - em, res.cut_size
                 rays += res.shadow_rays

@@ -230,3 +230,25 @@ def test_rough_pass_samples_follow_a_budget_not_the_pixels():
     assert rough_samples(640 * 480, 16) == 2
     assert rough_samples(1920 * 1080, 16) == 1
     assert rough_samples(10, 4) == 4
+
+
+def test_stochastic_gather_agrees_with_brute_force():
+    """The stochastic gather is unbiased for the VPLs: on the same VPLs (same seed) its
+    image energy is the brute-force gather's within 1 % (measured 0.2 %: 768 pixels of
+    about 10 % noise each) and its relMSE is noise of the expected size (measured 0.004)."""
+    s = RenderSettings(**FAST, seed=2)
+    a = render(closed_room(32, 24), s.replace(gather="STOCHASTIC")).image[..., :3]
+    b = render(closed_room(32, 24), s.replace(gather="BRUTE_FORCE")).image[..., :3]
+    assert abs(luminance(a).mean() / luminance(b).mean() - 1) < 0.01
+    assert relmse(a, b) < 0.02
+
+
+def test_stochastic_gather_uses_the_time_left_for_more_passes():
+    """Under a time limit the stochastic gather repeats passes while another one fits and
+    averages them; without one it makes a single pass."""
+    s = RenderSettings(**FAST, seed=3, gather="STOCHASTIC")
+    one = render(closed_room(32, 24), s)
+    assert one.stats["gather_passes"] == 1
+    paced = render(closed_room(32, 24), s.replace(time_limit=6.0, iterations=1))
+    assert paced.stats["gather_passes"] >= 2
+    assert np.isfinite(paced.image).all()

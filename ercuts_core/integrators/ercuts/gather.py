@@ -32,6 +32,11 @@ PROGRESS_GATHER_POINTS = 512
 GLOSSY_ROUGHNESS = 0.5
 #: ``settings.lightcut_error`` → the ``error_mode`` of :func:`.lightcuts.lightcut`.
 ERROR_MODES = {"NODE": "bound", "TOTAL": "total", "LITERAL": "literal"}
+#: Seed salt of the stochastic gather's draws (with the seed, the pass and the batch start).
+PASS_SALT = 0x5C7
+#: Another stochastic gather pass starts only if the time left is this many times the first
+#: pass's duration (an unfinished pass is discarded).
+PASS_MARGIN = 1.2
 #: Consecutive shading points kept together in the shuffled gather order (coherent rays).
 GATHER_RUN = 32
 #: Glossy shading points get the per-cluster GGX material bound (:class:`.lightcuts.
@@ -83,83 +88,32 @@ class Gather:
 
         Cancelling (or running out of time) stops after the current batch; a cancel during a
         lightcut batch stops its refinement, so the batch keeps coarser but complete cuts.
+        The stochastic gather, paced under a time limit, repeats whole passes (new VPL draws,
+        :data:`PASS_SALT`) while the time left holds another one, and averages them: its
+        error is noise, so the budget the bounded gather would spend on refinement goes
+        into averaging instead.
         """
-        scene, s, g = self.scene, self.settings, self.g
-        clock = schedule.clock
-        window = scene.camera.window
+        s, g, window = self.settings, self.g, self.scene.camera.window
         Q, S = len(g.pixel), g.samples
-        L = np.zeros((2, Q, 3))              # [from emitter VPLs, from the others]
-        cut = np.zeros(Q)
-        done_pt = ~g.valid                   # misses need no gather
         pts_all = spread_order(np.flatnonzero(g.valid), s.seed)
         if len(vpls) == 0:
             pts_all = pts_all[:0]
-        # Absolute error floor (algorithm.md §G.6; not in the papers): below a small fraction
-        # of the mean pixel luminance, Weber's law no longer applies (dark pixels would refine
-        # to max_cut_size for errors nobody can see).
-        floor = s.max_error * ABS_FLOOR * stats.get("P", 0.0) / max(window.n_pixels, 1)
-        f_bound = scene.bsdf_max_value(g.mat, g.p)
-        clamp = 0.0 if not np.isfinite(gmax) else gmax
-        share = emitter_share(tree, vpls) if tree is not None else None
-        rays = 0
-        clamped = 0.0
-        unmet = 0
-        done = 0
-        pace = GatherPace(s.max_error, s.max_cut_size)
-
-        def report(f_done):
-            f = f_done / max(len(pts_all), 1)
-            return clock.poll(schedule.fraction("Lightcuts", f),
-                              f"Lightcuts {100 * f:.0f}% | {rays / 1e6:.2f}M shadow rays") \
-                and clock.remaining() > 0
-
-        # A small first batch calibrates the cost per point before the cap is fitted.
-        step = min(self.gather_batch, PROGRESS_GATHER_POINTS)
-        edges = np.unique(np.r_[0, np.arange(min(256, len(pts_all)), len(pts_all), step), len(pts_all)])
-        for start, stop in zip(edges[:-1], edges[1:]):
-            idx = pts_all[start:stop]
-            t_batch = time.perf_counter()
-            pts = self._shading_points(idx, f_bound)
-            if s.gather in ("LIGHTCUTS", "STOCHASTIC"):
-                if s.gather == "STOCHASTIC":
-                    rng = np.random.default_rng([s.seed, 0x5C7, start])
-                    res = stochastic_lightcut(tree, vpls.position, vpls.normal, vpls.intensity,
-                                              pts, rng, cut_size=min(pace.cap, s.stochastic_cut_size),
-                                              clamp=clamp)
-                else:
-                    res = lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
-                                   max_error=pace.error, max_cut_size=pace.cap, clamp=clamp,
-                                   abs_floor=floor, error_mode=ERROR_MODES[s.lightcut_error],
-                                   return_cut=True, on_round=lambda: report(start))
-                em = _sum_rows(res.cut_point, res.cut_estimate * share[res.cut_node], len(idx))
-                L[0, idx], L[1, idx], cut[idx] = em, res.radiance - em, res.cut_size
-                rays += res.shadow_rays
-                clamped += res.clamped_energy
-                unmet += int(res.unmet.sum())
-            else:
-                for part, sel in enumerate((vpls.emitter, ~vpls.emitter)):
-                    if sel.any():
-                        L[part, idx] = brute_force(vpls.position[sel], vpls.normal[sel],
-                                                   vpls.intensity[sel], pts, clamp=clamp)
-                cut[idx] = len(vpls)
-                rays += len(idx) * len(vpls)
-            done = start + len(idx)
-            done_pt[idx] = True
-            pace.update(len(idx), time.perf_counter() - t_batch, cut[idx].mean(),
-                        len(pts_all) - done, schedule.remaining())
-            if not report(done) and done < len(pts_all):
-                stats["gather_incomplete"] = 1
-                clock.cancelled = True
-                break
-            show(L, done_pt.reshape(-1, S).all(axis=1))
-        pace.record(stats, done)
-        valid_cut = cut[pts_all[:done]] if done else np.zeros(1)
-        stats["cut_size_mean"] = float(valid_cut.mean()) if done else 0.0
-        stats["cut_size_max"] = int(valid_cut.max()) if done else 0
-        # Points whose cut hit the size cap (or the pacing) before the error rule held.
-        stats["cut_bound_unmet"] = unmet / done if done else 0.0
-        stats["gather_shadow_rays"] = rays
-        stats["clamped_energy"] = clamped / S
+        sweep = _Sweep(self, vpls, tree, gmax, schedule, stats, pts_all)
+        t0 = time.perf_counter()
+        L, cut, done_pt, done = sweep.run(0, show)
+        passes = 1
+        if s.gather == "STOCHASTIC" and schedule.paced and schedule.clock.deadline is not None \
+                and done == len(pts_all) and len(pts_all):
+            t_pass = time.perf_counter() - t0
+            while schedule.remaining() > PASS_MARGIN * t_pass and not schedule.clock.cancelled:
+                L2, _, _, done2 = sweep.run(passes, lambda parts, c: None)
+                if done2 < len(pts_all):
+                    break                               # an unfinished pass is discarded
+                L = L + (L2 - L) / (passes + 1)         # running mean of the passes
+                passes += 1
+                show(L, done_pt.reshape(-1, S).all(axis=1))
+        stats["gather_passes"] = passes
+        sweep.record(stats, done, cut)
         glossy = self._glossy()
         return Gathered(parts=per_pixel_parts(L, S),
                         glossy=per_pixel(L.sum(axis=0) * glossy[:, None], window.n_pixels, S),
@@ -195,6 +149,104 @@ class Gather:
         glossy = (GlossyReceivers.from_bsdf(bsdf, wo, g.ns[idx])
                   if GLOSSY_CLUSTER_BOUND and not bsdf.all_diffuse else None)
         return ShadingPoints(p, g.ns[idx], wo, f_bound[idx], eval_f, visible, glossy=glossy)
+
+
+class _Sweep:
+    """One pass of the gather over the shading points ``pts_all`` (in batches, paced, with
+    progress); :meth:`run` may be called again for another pass of the stochastic gather."""
+
+    def __init__(self, gather: Gather, vpls, tree, gmax: float, schedule: Schedule,
+                 stats: dict, pts_all: NDArray):
+        self.gather, self.vpls, self.tree, self.schedule = gather, vpls, tree, schedule
+        self.pts_all = pts_all
+        scene, s, window = gather.scene, gather.settings, gather.scene.camera.window
+        # Absolute error floor (algorithm.md §G.6; not in the papers): below a small fraction
+        # of the mean pixel luminance, Weber's law no longer applies (dark pixels would refine
+        # to max_cut_size for errors nobody can see).
+        self.floor = s.max_error * ABS_FLOOR * stats.get("P", 0.0) / max(window.n_pixels, 1)
+        self.f_bound = scene.bsdf_max_value(gather.g.mat, gather.g.p)
+        self.clamp = 0.0 if not np.isfinite(gmax) else gmax
+        self.share = emitter_share(tree, vpls) if tree is not None else None
+        self.rays, self.clamped, self.unmet = 0, 0.0, 0
+        self.stats = stats
+        self.pace = GatherPace(s.max_error, s.max_cut_size)
+
+    def _report(self, f_done: float) -> bool:
+        clock = self.schedule.clock
+        f = f_done / max(len(self.pts_all), 1)
+        return clock.poll(self.schedule.fraction("Lightcuts", f),
+                          f"Lightcuts {100 * f:.0f}% | {self.rays / 1e6:.2f}M shadow rays") \
+            and clock.remaining() > 0
+
+    def run(self, pass_index: int, show) -> tuple[NDArray, NDArray, NDArray, int]:
+        """Gather pass ``pass_index``: (2, Q, 3) light parts, (Q,) cut sizes, (Q,) points
+        done and the number of ``pts_all`` done (fewer when stopped)."""
+        ga, s, pts_all = self.gather, self.gather.settings, self.pts_all
+        g = ga.g
+        Q, S = len(g.pixel), g.samples
+        L = np.zeros((2, Q, 3))              # [from emitter VPLs, from the others]
+        cut = np.zeros(Q)
+        done_pt = ~g.valid                   # misses need no gather
+        done, pace = 0, self.pace
+        # A small first batch calibrates the cost per point before the cap is fitted.
+        step = min(ga.gather_batch, PROGRESS_GATHER_POINTS)
+        edges = np.unique(np.r_[0, np.arange(min(256, len(pts_all)), len(pts_all), step), len(pts_all)])
+        for start, stop in zip(edges[:-1], edges[1:]):
+            idx = pts_all[start:stop]
+            t_batch = time.perf_counter()
+            self._batch(idx, start, pass_index, L, cut)
+            done = start + len(idx)
+            done_pt[idx] = True
+            if pass_index == 0:
+                pace.update(len(idx), time.perf_counter() - t_batch, cut[idx].mean(),
+                            len(pts_all) - done, self.schedule.remaining())
+            if not self._report(done) and done < len(pts_all):
+                if pass_index == 0:
+                    self.stats["gather_incomplete"] = 1
+                    self.schedule.clock.cancelled = True
+                break
+            show(L, done_pt.reshape(-1, S).all(axis=1))
+        return L, cut, done_pt, done
+
+    def _batch(self, idx: NDArray, start: int, pass_index: int, L: NDArray, cut: NDArray) -> None:
+        """Gather the points ``idx`` into ``L`` and ``cut``."""
+        s, vpls, tree, pace = self.gather.settings, self.vpls, self.tree, self.pace
+        pts = self.gather._shading_points(idx, self.f_bound)
+        if s.gather == "BRUTE_FORCE":
+            for part, sel in enumerate((vpls.emitter, ~vpls.emitter)):
+                if sel.any():
+                    L[part, idx] = brute_force(vpls.position[sel], vpls.normal[sel],
+                                               vpls.intensity[sel], pts, clamp=self.clamp)
+            cut[idx] = len(vpls)
+            self.rays += len(idx) * len(vpls)
+            return
+        if s.gather == "STOCHASTIC":
+            rng = np.random.default_rng([s.seed, PASS_SALT, pass_index, start])
+            res = stochastic_lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
+                                      rng, cut_size=min(pace.cap, s.stochastic_cut_size),
+                                      clamp=self.clamp)
+        else:
+            res = lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
+                           max_error=pace.error, max_cut_size=pace.cap, clamp=self.clamp,
+                           abs_floor=self.floor, error_mode=ERROR_MODES[s.lightcut_error],
+                           return_cut=True, on_round=lambda: self._report(start))
+        em = _sum_rows(res.cut_point, res.cut_estimate * self.share[res.cut_node], len(idx))
+        L[0, idx], L[1, idx], cut[idx] = em, res.radiance - em, res.cut_size
+        self.rays += res.shadow_rays
+        self.clamped += res.clamped_energy
+        self.unmet += int(res.unmet.sum())
+
+    def record(self, stats: dict, done: int, cut: NDArray) -> None:
+        """The gather's statistics (first pass's cuts; rays and clamp of every pass)."""
+        S = self.gather.g.samples
+        self.pace.record(stats, done)
+        valid_cut = cut[self.pts_all[:done]] if done else np.zeros(1)
+        stats["cut_size_mean"] = float(valid_cut.mean()) if done else 0.0
+        stats["cut_size_max"] = int(valid_cut.max()) if done else 0
+        # Points whose cut hit the size cap (or the pacing) before the error rule held.
+        stats["cut_bound_unmet"] = self.unmet / done if done else 0.0
+        stats["gather_shadow_rays"] = self.rays
+        stats["clamped_energy"] = self.clamped / S / stats.get("gather_passes", 1)
 
 
 def spread_order(points: NDArray, seed: int) -> NDArray:

@@ -338,7 +338,7 @@ class ErcutsIntegrator:
         s, sched = self.settings, self.schedule
         tree = None
         label = f"| {len(vpls)} VPLs"
-        if s.gather == "LIGHTCUTS" and len(vpls):
+        if s.gather != "BRUTE_FORCE" and len(vpls):
             tree = build_light_tree(vpls.position, vpls.normal, vpls.intensity, seed=s.seed,
                                     pairing=s.tree_pairing.lower(),
                                     keep_going=lambda f: sched.report(

@@ -16,7 +16,8 @@ import bpy
 from bpy.props import EnumProperty
 
 PREVIEW = {
-    "samples": 4,
+    "samples": 16,
+    "rough_samples": 4,
     "max_depth": 4,
     "rr_depth": 2,
     "chains_per_pixel": 0.1,
@@ -30,7 +31,8 @@ PREVIEW = {
 
 #: Fallback for the Final preset when the core cannot be imported (its defaults).
 _FINAL_FALLBACK = {
-    "samples": 16,
+    "samples": 4096,
+    "rough_samples": 16,
     "max_depth": 64,
     "rr_depth": 3,
     "chains_per_pixel": 0.25,

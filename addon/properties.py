@@ -107,8 +107,15 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
     )
     samples: IntProperty(
         name="Samples",
-        description="Number of samples per pixel",
-        default=_default("samples", 16), min=1, soft_max=4096,
+        description="Path Tracing and Bidirectional: samples per pixel (with a time limit, the "
+                    "limit is what stops the render, as in Cycles)",
+        default=_default("samples", 4096), min=1, soft_max=16384,
+    )
+    rough_samples: IntProperty(
+        name="Rough Samples",
+        description="Ercuts: samples per pixel of each iteration's rough bidirectional image, which "
+                    "measures the light the chains redistribute (step 1)",
+        default=_default("rough_samples", 16), min=1, soft_max=256,
     )
     seed: IntProperty(
         name="Seed",

@@ -97,9 +97,12 @@ class ERCUTS_RENDER_PT_sampling(ErcutsPanel, bpy.types.Panel):
         layout, settings = _settings_layout(self.layout, context)
         layout.prop(settings, "integrator")
         col = layout.column(align=True)
-        col.prop(settings, "samples")
-        if settings.integrator == "ERCUTS" and settings.direct_light == "NEE":
-            col.prop(settings, "direct_samples")
+        if settings.integrator == "ERCUTS":
+            col.prop(settings, "rough_samples")
+            if settings.direct_light == "NEE":
+                col.prop(settings, "direct_samples")
+        else:
+            col.prop(settings, "samples")
         col.prop(settings, "seed")
         col.prop(settings, "use_animated_seed")
         col = layout.column(align=True)

@@ -149,7 +149,7 @@ def main(argv=None) -> int:
           f"{d.mesh.n_triangles} triangles, {len(d.textures)} images, "
           f"texture memory {d.textures.nbytes / 2**20:.1f} MiB (float32 RGBA)")
     for name, kw in [("PATH", dict(samples=16)),
-                     ("ERCUTS", dict(samples=4, chain_length=20, chains_per_pixel=0.25))]:
+                     ("ERCUTS", dict(rough_samples=4, chain_length=20, chains_per_pixel=0.25))]:
         s = RenderSettings(integrator=name, seed=1, **kw)
         t_prog, t_const = _best(d, s, args.repeat), _best(plain, s, args.repeat)
         share = (t_prog - t_const) / t_prog

@@ -66,13 +66,41 @@ def open_scene(name: str, width: int, height: int):
     return s
 
 
+#: Cycles settings reset to Cycles' own defaults (their RNA defaults) for the "Cycles at its
+#: defaults" rows (CYCLES_DEFAULT): what a user gets without touching the render settings
+#: (4096 samples with adaptive sampling, OpenImageDenoise, 12 bounces with 4 diffuse,
+#: indirect clamp 10, light threshold 0.01, filter glossy 1); the time limit is the budget.
+DEFAULT_KEYS = ("samples", "use_adaptive_sampling", "adaptive_threshold", "adaptive_min_samples",
+                "use_denoising", "denoiser", "max_bounces", "diffuse_bounces", "glossy_bounces",
+                "transmission_bounces", "volume_bounces", "transparent_max_bounces",
+                "min_light_bounces", "min_transparent_bounces", "sample_clamp_direct",
+                "sample_clamp_indirect", "light_sampling_threshold", "caustics_reflective",
+                "caustics_refractive", "blur_glossy", "pixel_filter_type", "filter_width",
+                "use_guiding", "use_light_tree")
+
+
+def open_scene_defaults(name: str, width: int, height: int):
+    """:func:`open_scene` with the estimator settings of :data:`DEFAULT_KEYS` back at Cycles'
+    own defaults (read from the RNA, so they are this Blender's)."""
+    s = open_scene(name, width, height)
+    c = s.cycles
+    props = c.bl_rna.properties
+    for key in DEFAULT_KEYS:
+        prop = props.get(key)
+        # (an enum whose RNA default is empty, the denoiser in 5.0.1, keeps the file's value)
+        if prop is not None and not prop.is_readonly and (prop.type != "ENUM" or prop.default):
+            setattr(c, key, prop.default)
+    return s
+
+
 def settings_record(scene) -> dict:
     """The Cycles settings that decide the estimator (stored with every result)."""
     c = scene.cycles
     keys = ("samples", "time_limit", "seed", "max_bounces", "diffuse_bounces", "glossy_bounces",
             "use_adaptive_sampling", "use_denoising", "pixel_filter_type", "filter_width",
             "sample_clamp_direct", "sample_clamp_indirect", "light_sampling_threshold",
-            "caustics_reflective", "caustics_refractive", "blur_glossy")
+            "caustics_reflective", "caustics_refractive", "blur_glossy", "adaptive_threshold",
+            "denoiser", "transmission_bounces")
     rec = {k: getattr(c, k) for k in keys}
     rec["threads"] = scene.render.threads
     rec["blender"] = _bpy().app.version_string
@@ -131,6 +159,17 @@ def calibrate(name: str, width: int, height: int, samples: int = 16) -> float:
     r = render_fixed(name, samples, 12345, width, height)
     t = r["times"].get("render_time", r["wall"])
     return samples / max(t, 1e-3)
+
+
+def render_cycles_defaults(name: str, budget: float, seed: int, width: int, height: int) -> dict:
+    """Cycles at its own defaults (:func:`open_scene_defaults`) with ``time_limit`` = the budget
+    (minus the sync allowance): what a user who sets only a time limit gets. 'samples' is
+    Cycles' requested count (adaptive sampling and the limit stop it earlier)."""
+    s = open_scene_defaults(name, width, height)
+    s.cycles.seed, s.cycles.time_limit = int(seed), max(budget - 0.1, 0.05)
+    img, wall, header = _render(s)
+    return dict(image=img, wall=wall, samples=int(s.cycles.samples), times=_header_times(header),
+                settings=settings_record(s), capped=True)
 
 
 def render_cycles(name: str, budget: float, seed: int, width: int, height: int, rate: float) -> dict:

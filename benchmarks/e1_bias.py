@@ -47,7 +47,7 @@ from ercuts_core.scenes import closed_room, cornell_box, door_ajar, s_corridor  
 
 SCENES = {"cornell_box": cornell_box, "closed_room": closed_room, "s_corridor": s_corridor,
           "door_ajar": door_ajar}
-FAST = dict(integrator="ERCUTS", samples=8, chain_length=40, chains_per_pixel=0.5,
+FAST = dict(integrator="ERCUTS", rough_samples=8, chain_length=40, chains_per_pixel=0.5,
             gather="BRUTE_FORCE")
 
 

@@ -30,7 +30,9 @@ def parse(argv):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("blend", help=".blend file to render")
     p.add_argument("-o", "--output", help="output path without extension (default: out/<name>)")
-    p.add_argument("--samples", type=int)
+    p.add_argument("--samples", type=int, help="PATH/BDPT samples per pixel")
+    p.add_argument("--rough-samples", type=int, help="ERCUTS: rough BDPT samples per pixel per iteration")
+    p.add_argument("--iterations", type=int, help="ERCUTS iterations (0 = until the time limit)")
     p.add_argument("--integrator", choices=("ERCUTS", "BDPT", "PATH"))
     p.add_argument("--max-depth", type=int)
     p.add_argument("--time-limit", type=float)
@@ -49,7 +51,7 @@ def main(argv=None) -> int:
     bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
     scene = bpy.context.scene
     scene.render.engine = args.engine
-    for key in ("samples", "integrator", "max_depth", "time_limit", "seed"):
+    for key in ("samples", "rough_samples", "iterations", "integrator", "max_depth", "time_limit", "seed"):
         value = getattr(args, key)
         if value is not None:
             setattr(scene.ercuts, key, value)

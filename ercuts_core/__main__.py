@@ -61,7 +61,8 @@ def _progress_bar():
 
 def cmd_render(args) -> int:
     desc = _load(args.scene, args.width, args.height)
-    settings = RenderSettings(integrator=args.integrator, samples=args.samples, seed=args.seed,
+    settings = RenderSettings(integrator=args.integrator, samples=args.samples,
+                              rough_samples=args.rough_samples, seed=args.seed,
                               max_depth=args.max_depth, time_limit=quick_time_limit(args.time_limit),
                               iterations=args.iterations)
     bar, progress = _progress_bar()
@@ -109,7 +110,11 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--integrator", default=defaults.integrator, choices=("ERCUTS", "BDPT", "PATH"),
                    help="default: %(default)s")
     r.add_argument("--samples", type=int, default=defaults.samples,
-                   help="samples per pixel (ERCUTS: of its rough BDPT image); default: %(default)s")
+                   help="PATH/BDPT samples per pixel (with --time-limit the limit stops the render, "
+                        "as in Cycles); default: %(default)s")
+    r.add_argument("--rough-samples", type=int, default=defaults.rough_samples,
+                   help="ERCUTS: samples per pixel of each iteration's rough BDPT image; "
+                        "default: %(default)s")
     r.add_argument("--seed", type=int, default=defaults.seed, help="default: %(default)s")
     r.add_argument("--max-depth", type=int, default=defaults.max_depth,
                    help="scattering vertices per path; default: %(default)s")

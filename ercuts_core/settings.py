@@ -44,9 +44,12 @@ class RenderSettings:
         integrator: 'ERCUTS' (the paper: BDPT → ER chains → VPLs → light tree →
             lightcuts), 'BDPT' (bidirectional path tracing with MIS; also the "BDPT only"
             ablation) or 'PATH' (the reference path tracer with next-event estimation).
-        samples: samples per pixel (for ERCUTS: of the rough BDPT image of step 1, which
-            only measures P and previews: at most 2^19 camera samples in all per iteration,
-            ``integrator.rough_samples``).
+        samples: PATH and BDPT samples per pixel. The default is Cycles' (4096): with a
+            ``time_limit`` the limit is what stops the render, as in Cycles (issue 13).
+        rough_samples: ERCUTS: samples per pixel of each iteration's rough BDPT image
+            (step 1), which only measures P, seeds the chains and previews: at most 2^19
+            camera samples per iteration in all: beyond, the rough image has a lower
+            resolution (``initialization.rough_factor``).
         seed: random seed; the same seed and settings give the same image.
         max_depth: maximum number of bounces (path segments − 1); 1 = direct light only.
             The default 64 keeps the light of deep interiors (8 lost up to 64 % of it in an
@@ -113,7 +116,8 @@ class RenderSettings:
     """
 
     integrator: str = "ERCUTS"
-    samples: int = 16
+    samples: int = 4096
+    rough_samples: int = 16
     seed: int = 0
     max_depth: int = 64
     rr_depth: int = 3
@@ -148,8 +152,8 @@ class RenderSettings:
     def __post_init__(self):
         if self.integrator not in INTEGRATORS:
             raise ValueError(f"unknown integrator {self.integrator!r}; expected one of {INTEGRATORS}")
-        if self.samples < 1:
-            raise ValueError(f"samples must be >= 1, got {self.samples}")
+        if min(self.samples, self.rough_samples) < 1:
+            raise ValueError(f"samples and rough_samples must be >= 1, got {self.samples}, {self.rough_samples}")
         if self.max_depth < 1:
             raise ValueError(f"max_depth must be >= 1, got {self.max_depth}")
         if self.time_limit < 0:

@@ -130,7 +130,7 @@ def test_ercuts_direct_and_indirect_match_bdpt():
     BDPT's within 10 % (measured −4 % and +5 %; 3 BDPT seeds at 16 spp spread by ~1 %;
     misfiling the emitter VPLs would move ~45 % of the energy between the passes)."""
     desc = closed_room(32, 24)
-    e = render(desc, RenderSettings(integrator="ERCUTS", samples=8, chain_length=40, seed=1)).aovs
+    e = render(desc, RenderSettings(integrator="ERCUTS", rough_samples=8, chain_length=40, seed=1)).aovs
     b = [render(desc, RenderSettings(integrator="BDPT", samples=16, seed=s)).aovs for s in range(3)]
     for name in ("direct", "indirect"):
         ref = np.mean([x[name].sum() for x in b])

@@ -11,7 +11,7 @@ import numpy as np
 from ercuts_core import RenderSettings, render
 from ercuts_core.scenes import cornell_box
 
-TINY = dict(integrator="ERCUTS", samples=1, chain_length=10, direct_samples=1, e1_samples=16, threads=1)
+TINY = dict(integrator="ERCUTS", rough_samples=1, chain_length=10, direct_samples=1, e1_samples=16, threads=1)
 
 
 def test_cornell_box_corner_pixels_get_indirect_light():

@@ -241,7 +241,7 @@ def test_constant_map_renders_like_the_constant_world():
         b = _renders(cmap, integrator, 6, spp, seed0=200)
         _assert_agree(a, b)
     # ERCUTS: the same image energy (chains and VPLs see the map as they see the constant)
-    fast = dict(integrator="ERCUTS", samples=8, chain_length=40, chains_per_pixel=0.5, seed=1)
+    fast = dict(integrator="ERCUTS", rough_samples=8, chain_length=40, chains_per_pixel=0.5, seed=1)
     e_c = luminance(render(const, RenderSettings(**fast)).image[..., :3]).mean()
     e_m = luminance(render(cmap, RenderSettings(**fast)).image[..., :3]).mean()
     assert abs(e_m / e_c - 1) < 0.03, (e_m, e_c)
@@ -252,7 +252,7 @@ def test_hot_spot_map_path_bdpt_ercuts_agree():
     path = _renders(d, "PATH", 6, 32, seed0=1000)
     bdpt = _renders(d, "BDPT", 6, 16, seed0=2000)
     _assert_agree(path, bdpt)
-    fast = dict(integrator="ERCUTS", samples=8, chain_length=40, chains_per_pixel=0.5, seed=3)
+    fast = dict(integrator="ERCUTS", rough_samples=8, chain_length=40, chains_per_pixel=0.5, seed=3)
     e = render(d, RenderSettings(**fast)).image[..., :3]
     ref = path.mean(0)
     assert abs(luminance(e).mean() / luminance(ref).mean() - 1) < 0.03

@@ -15,7 +15,7 @@ from ercuts_core.scenes import closed_room, s_corridor
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REF = os.path.join(HERE, "data", "closed_room_48x36_path_2048spp.npz")
-FAST = dict(integrator="ERCUTS", samples=8, chain_length=40, chains_per_pixel=0.5)
+FAST = dict(integrator="ERCUTS", rough_samples=8, chain_length=40, chains_per_pixel=0.5)
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +97,7 @@ def test_same_seed_same_image():
 
 def test_time_limit_covers_all_phases():
     t0 = time.perf_counter()
-    r = render(s_corridor(160, 120), RenderSettings(integrator="ERCUTS", samples=64, chain_length=200,
+    r = render(s_corridor(160, 120), RenderSettings(integrator="ERCUTS", rough_samples=64, chain_length=200,
                                                     chains_per_pixel=1.0, time_limit=6.0))
     elapsed = time.perf_counter() - t0
     assert elapsed < 6.0 + 2.0, elapsed
@@ -221,15 +221,50 @@ def test_max_chains_caps_the_chains_and_keeps_the_energy():
     assert abs(e_cap / e_full - 1) < 0.03, (e_cap, e_full)
 
 
-def test_rough_pass_samples_follow_a_budget_not_the_pixels():
-    """Step 1 only measures P (and previews): 16 spp at 160×120, fewer per pixel above
-    2^19 camera samples — 2 at 640×480, 1 at 1920×1080 — never 0."""
-    from ercuts_core.integrators.ercuts.integrator import rough_samples
+def test_rough_image_follows_a_budget_not_the_pixels():
+    """Step 1 only measures P (and previews): 16 spp at full resolution up to 2^19 camera
+    samples (160×120), beyond it a lower resolution — 1/4 at 640×480, 1/8 at 1920×1080."""
+    from ercuts_core.integrators.ercuts.initialization import rough_factor
 
-    assert rough_samples(160 * 120, 16) == 16
-    assert rough_samples(640 * 480, 16) == 2
-    assert rough_samples(1920 * 1080, 16) == 1
-    assert rough_samples(10, 4) == 4
+    assert rough_factor(160 * 120, 16) == 1
+    assert rough_factor(640 * 480, 16) == 4
+    assert rough_factor(1920 * 1080, 16) == 8
+    assert rough_factor(10, 4) == 1
+
+
+def test_rough_camera_sees_the_same_view():
+    """The low-resolution rough camera's rays through a point of the frame are the full
+    camera's rays through the same point of the frame (non-square pixels, border, shift)."""
+    import dataclasses
+
+    from ercuts_core.camera import Camera
+    from ercuts_core.integrators.ercuts.initialization import rough_camera
+
+    desc = dataclasses.replace(closed_room(101, 67).camera, pixel_aspect_x=1.3, shift_x=0.1,
+                               use_border=True, border=(0.1, 0.2, 0.7, 0.9))
+    full, low = Camera(desc), Camera(rough_camera(desc, 4))
+    assert (low.width, low.height) == (25, 17)
+    u = np.random.default_rng(0).random((50, 2))             # positions as fractions of the frame
+    for a, b in zip(full.generate_rays(u * [101, 67]), low.generate_rays(u * [25, 17])):
+        np.testing.assert_allclose(a, b, atol=1e-12)
+
+
+def test_low_resolution_rough_image_measures_the_same_energy(monkeypatch):
+    """P from a rough image at 1/2 of the resolution (the budget forced down) agrees with P
+    at full resolution within 4 standard errors of the difference (spread over 4 seeds each)."""
+    from ercuts_core.integrators.ercuts import initialization
+
+    def P(budget, seed):
+        monkeypatch.setattr(initialization, "ROUGH_SAMPLE_BUDGET", budget)
+        r = render(closed_room(48, 36), RenderSettings(**FAST, seed=seed, iterations=1))
+        return r.stats["P"], r.stats["rough_resolution"]
+
+    full = [P(1 << 19, s) for s in range(4)]
+    low = [P(48 * 36 * 8 // 4, s) for s in range(4)]          # 2 spp·(24×18) … k = 2
+    assert {w for _, w in full} == {48} and {w for _, w in low} == {24}
+    a, b = np.array([p for p, _ in full]), np.array([p for p, _ in low])
+    se = np.sqrt(a.var(ddof=1) / len(a) + b.var(ddof=1) / len(b))
+    assert abs(a.mean() - b.mean()) < 4 * se + 1e-12, (a, b)
 
 
 def test_stochastic_gather_agrees_with_brute_force():

@@ -31,7 +31,7 @@ PROFILE = dict(derandomize=True, database=None, deadline=None,
 #: Cases for validate + build, and renders per integrator.
 N_BUILD = 2000
 N_RENDER = 150
-TINY = dict(samples=1, max_depth=3, chain_length=3, e1_samples=4, max_cut_size=16, batch_rays=4096,
+TINY = dict(samples=1, rough_samples=1, max_depth=3, chain_length=3, e1_samples=4, max_cut_size=16, batch_rays=4096,
             threads=1)
 
 VERTEX_DEFECTS = ("nan", "inf", "huge", "duplicate")

@@ -13,7 +13,7 @@ from ercuts_core.integrators.ercuts.progressive import (CLAMP_ALPHA, iteration_c
                                                         iteration_settings, iteration_target)
 from ercuts_core.scenes import closed_room
 
-FAST = dict(integrator="ERCUTS", samples=4, chain_length=20, chains_per_pixel=0.5, direct_samples=8)
+FAST = dict(integrator="ERCUTS", rough_samples=4, chain_length=20, chains_per_pixel=0.5, direct_samples=8)
 
 
 def test_iteration_seeds_and_clamps():
@@ -33,6 +33,42 @@ def test_iteration_seeds_and_clamps():
         RenderSettings(iterations=-1)
     with pytest.raises(ValueError, match="iteration_start"):
         RenderSettings(iteration_start=-1)
+
+
+def test_which_iterations_are_paced():
+    """Without a target (until the time limit) the first iteration is paced, later ones only
+    when the time left is under PACE_MARGIN × the last duration; with a target every one is,
+    to 1/(N − k) of the time left; a paced iteration fills its time only when it is the last
+    or the time left is under START_SHARE × its duration so far."""
+    from types import SimpleNamespace
+
+    from ercuts_core.integrators.ercuts.progressive import (PACE_MARGIN, START_SHARE, fills_time,
+                                                            iteration_end, paced_iteration)
+
+    def clock(left):
+        return SimpleNamespace(deadline=100.0, remaining=lambda: left)
+
+    free = SimpleNamespace(deadline=None, remaining=lambda: float("inf"))
+    assert not paced_iteration(0, None, free, []) and iteration_end(2, 4, free, 5.0) is None
+    assert paced_iteration(0, None, clock(50.0), [])
+    assert not paced_iteration(3, None, clock(PACE_MARGIN * 10.0 + 0.1), [10.0])
+    assert paced_iteration(3, None, clock(PACE_MARGIN * 10.0 - 0.1), [10.0])
+    assert paced_iteration(3, 5, clock(80.0), [1.0])
+    assert iteration_end(1, 5, clock(80.0), 20.0) == pytest.approx(20.0 + 80.0 / 4)
+    assert iteration_end(1, None, clock(80.0), 20.0) == 100.0
+    assert fills_time(clock(START_SHARE * 10.0 - 0.1), started=0.0, now=10.0)
+    assert not fills_time(clock(START_SHARE * 10.0 + 0.1), started=0.0, now=10.0)
+
+
+def test_a_time_limit_is_spent_on_complete_iterations():
+    """Until the time limit (iterations = 0) on a room whose iteration takes a fraction of the
+    limit: several iterations (12 measured), most of them unpaced (full quality: 1 paced
+    measured)."""
+    r = render(closed_room(16, 12), RenderSettings(**FAST, seed=1, gather="STOCHASTIC", time_limit=8.0))
+    st = r.stats
+    assert st["iterations"] >= 3, st
+    assert st["iterations_paced"] <= st["iterations"] / 2, st      # the first and the last few
+    assert r.stopped_by in (None, "time_limit") and np.isfinite(r.image).all()
 
 
 def test_stratified_shading_positions():

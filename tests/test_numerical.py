@@ -131,7 +131,7 @@ def test_vpl_at_distance_zero_is_clamped_and_its_energy_counted(distance):
 
 def test_ercuts_reports_the_clamped_energy():
     from ercuts_core.scenes import cornell_box
-    r = render(cornell_box(24, 18), RenderSettings(samples=2, max_depth=4, chain_length=10,
+    r = render(cornell_box(24, 18), RenderSettings(rough_samples=2, max_depth=4, chain_length=10,
                                                    e1_samples=16, clamp=0.2))
     assert r.stats["clamped_energy"] > 0 and np.isfinite(r.stats["clamped_energy"])
     assert r.stats["nonfinite_samples"] == 0

@@ -22,7 +22,7 @@ from ercuts_core.sampling import luminance
 from ercuts_core.scenes import closed_room, cornell_box
 
 ERCUTS_PHASES = ("BDPT", "Direct light", "ER chains", "VPLs", "Light tree", "Lightcuts")
-FAST = dict(integrator="ERCUTS", samples=4, chain_length=20, e1_samples=32)
+FAST = dict(integrator="ERCUTS", rough_samples=4, chain_length=20, e1_samples=32)
 
 
 def _driver():
@@ -73,7 +73,7 @@ def test_ercuts_progress_names_phases_in_order_and_rises(ercuts_full):
 @pytest.mark.parametrize("integrator", ["PATH", "BDPT"])
 def test_path_and_bdpt_progress(integrator):
     rec = Recorder()
-    render(cornell_box(24, 18), RenderSettings(integrator=integrator, samples=3), rec)
+    render(cornell_box(24, 18), RenderSettings(integrator=integrator, samples=3, rough_samples=3), rec)
     assert set(rec.phases((integrator,))) == {integrator}
     f = np.array([c[0] for c in rec.calls])
     assert len(f) >= 3 and (np.diff(f) >= 0).all() and f[-1] == pytest.approx(1.0)
@@ -98,7 +98,7 @@ def test_preview_images_and_rate_limit(integrator, monkeypatch):
             np.testing.assert_array_equal(images[-1], result.image)   # the last pass is the result
     assert counts[1e9] == 1
     # ERCUTS: every rough pass, the rough image, and the 2 gather batches (256 + 176 points)
-    assert counts[0.0] == (3 if integrator == "BDPT" else FAST["samples"] + 1 + 2)
+    assert counts[0.0] == (3 if integrator == "BDPT" else FAST["rough_samples"] + 1 + 2)
 
 
 @pytest.mark.parametrize("phase", ERCUTS_PHASES)

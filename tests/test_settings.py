@@ -23,7 +23,7 @@ def test_from_dict_round_trip():
     assert RenderSettings.from_dict(s.to_dict()) == s
 
 
-@pytest.mark.parametrize("bad", [{"samples": 0}, {"integrator": "FOO"}, {"max_depth": 0},
+@pytest.mark.parametrize("bad", [{"samples": 0}, {"rough_samples": 0}, {"integrator": "FOO"}, {"max_depth": 0},
                                  {"time_limit": -1.0}, {"memory_budget_mb": -1}])
 def test_bad_values_raise(bad):
     with pytest.raises(ValueError):

@@ -51,7 +51,7 @@ def test_textured_plane_renders_the_texture_mean_under_a_uniform_sky():
     d = textured_plane()
     expected = CHECKER[..., :3].mean(axis=(0, 1)) * 1.5
     for integrator in ("PATH", "BDPT", "ERCUTS"):
-        img = render(d, RenderSettings(integrator=integrator, samples=8, seed=3, max_depth=2,
+        img = render(d, RenderSettings(integrator=integrator, samples=8, rough_samples=8, seed=3, max_depth=2,
                                        chain_length=20, chains_per_pixel=0.5)).image
         got = img[..., :3].reshape(-1, 3).mean(axis=0)
         np.testing.assert_allclose(got, expected, rtol=0.02, err_msg=integrator)
@@ -130,7 +130,7 @@ def cornell_energies():
     d = textured_cornell()
     return {"PATH": _energies(d, "PATH", range(6), samples=16),
             "BDPT": _energies(d, "BDPT", range(6), samples=8),
-            "ERCUTS": _energies(d, "ERCUTS", range(3), samples=8, chain_length=40, chains_per_pixel=0.5)}
+            "ERCUTS": _energies(d, "ERCUTS", range(3), rough_samples=8, chain_length=40, chains_per_pixel=0.5)}
 
 
 def _z(a: np.ndarray, b: np.ndarray) -> float:
@@ -194,7 +194,7 @@ def test_alpha_cutout_shows_the_sky_through_the_plane(alpha_value):
     else:                          # every texel: alpha·albedo·sky + (1 − alpha)·sky
         expected = alpha_value * CHECKER[..., :3].mean(axis=(0, 1)) * sky + (1 - alpha_value) * sky
     for integrator in ("PATH", "BDPT"):
-        img = render(d, RenderSettings(integrator=integrator, samples=16, seed=5, max_depth=2)).image
+        img = render(d, RenderSettings(integrator=integrator, samples=16, rough_samples=16, seed=5, max_depth=2)).image
         np.testing.assert_allclose(img[..., :3].reshape(-1, 3).mean(axis=0), expected, rtol=0.03,
                                    err_msg=integrator)
 
@@ -231,7 +231,7 @@ def test_textured_emission_is_evaluated_per_hit():
     d = d.replace(materials=MaterialTable(m.names, [[0.0] * 3], m.roughness, m.metallic, m.specular,
                                           m.emission, (prog,)))
     for integrator in ("PATH", "BDPT"):
-        img = render(d, RenderSettings(integrator=integrator, samples=8, seed=2, max_depth=2)).image
+        img = render(d, RenderSettings(integrator=integrator, samples=8, rough_samples=8, seed=2, max_depth=2)).image
         chroma = img[..., 2] / np.maximum(img[..., 0], 1e-9)
         assert chroma[0, 0] == pytest.approx(1 / 3, rel=0.02), integrator     # orange texel
         assert chroma[0, 3] == pytest.approx(1.0, rel=0.02), integrator       # grey texel

@@ -17,7 +17,7 @@ FAST_ERCUTS = dict(integrator="ERCUTS", samples=2, chain_length=10, e1_samples=1
 
 @pytest.mark.parametrize("integrator", ["PATH", "BDPT"])
 def test_time_limit_is_not_a_cancel(integrator):
-    r = render(cornell_box(32, 24), RenderSettings(integrator=integrator, samples=100000, time_limit=0.5))
+    r = render(cornell_box(32, 24), RenderSettings(integrator=integrator, samples=100000, rough_samples=100000, time_limit=0.5))
     assert r.cancelled and r.stopped_by == "time_limit"
     assert "time limit reached" in r.summary() and "CANCELLED" not in r.summary()
     assert json.loads(json.dumps(r.report_dict()))["stopped_by"] == "time_limit"

@@ -66,7 +66,7 @@ def test_no_camera_is_an_error():
     with pytest.raises(SceneError, match="no active camera"):
         sanitize(scene(camera=False))
     with pytest.raises(SceneError, match="no active camera"):
-        render(scene(camera=False), RenderSettings(samples=1))
+        render(scene(camera=False), RenderSettings(rough_samples=1))
 
 
 @pytest.mark.parametrize("w,h", [(0, 6), (8, 0)])

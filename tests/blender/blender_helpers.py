@@ -166,7 +166,7 @@ def setup_render(width=64, height=48, engine="ERCUTS", samples=16, integrator="P
     s.render.engine = engine
     s.render.resolution_x, s.render.resolution_y = width, height
     s.render.resolution_percentage = 100
-    s.ercuts.samples = samples
+    s.ercuts.samples = s.ercuts.rough_samples = samples
     s.ercuts.integrator = integrator
     s.ercuts.max_depth = max_depth
     return s

@@ -51,6 +51,7 @@ def render_both(tmp_path, max_depth=4, samples=64, cycles_samples=512, integrato
     s.render.resolution_x, s.render.resolution_y = W, H
     s.render.resolution_percentage = 100
     s.ercuts.samples, s.ercuts.integrator, s.ercuts.max_depth = samples, integrator, max_depth
+    s.ercuts.rough_samples = samples
     s.ercuts.seed = seed
     s.render.engine = "ERCUTS"
     ercuts = h.render_exr(tmp_path / f"{tag}_ercuts_{seed}.exr")

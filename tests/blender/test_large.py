@@ -71,7 +71,7 @@ def test_hundred_thousand_vpls_stay_within_the_memory_budget():
     from ercuts_core.memory import MIB, plan_for
 
     desc = scenes.cornell_box(160, 120)
-    s = RenderSettings(samples=1, max_depth=4, chains_per_pixel=7.0, max_chains=1 << 20,
+    s = RenderSettings(rough_samples=1, max_depth=4, chains_per_pixel=7.0, max_chains=1 << 20,
                        chain_length=12, e1_samples=8, max_cut_size=64, memory_budget_mb=1024)
     estimate = plan_for(desc, s).total
     tracemalloc.start()

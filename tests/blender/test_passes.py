@@ -149,7 +149,7 @@ def test_missing_aov_is_zero_and_warned(tmp_path, monkeypatch):
 def test_ercuts_diagnostic_passes(tmp_path):
     s = _scene(samples=2, integrator="ERCUTS")
     bpy.ops.ercuts.sampling_preset(preset="PREVIEW")
-    s.ercuts.samples = 2
+    s.ercuts.samples = s.ercuts.rough_samples = 2
     # VPLs on the lamp, which the camera sees (with direct light by light sampling the VPLs
     # are indirect only, at x2 on the wall, out of view: a density of 0 everywhere).
     s.ercuts.direct_light = "VPL"

@@ -31,7 +31,7 @@ def test_register_unregister_twice():
         assert not hasattr(bpy.types, "ERCUTS_RENDER_PT_sampling")
         addon.register()
         assert "ERCUTS" in _engines()
-        assert bpy.context.scene.ercuts.samples == 16
+        assert bpy.context.scene.ercuts.samples == 4096
         assert "ERCUTS" in bpy.types.RENDER_PT_format.COMPAT_ENGINES
     bpy.context.scene.render.engine = "ERCUTS"
     assert bpy.context.scene.render.engine == "ERCUTS"

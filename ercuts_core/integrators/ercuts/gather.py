@@ -88,10 +88,11 @@ class Gather:
 
         Cancelling (or running out of time) stops after the current batch; a cancel during a
         lightcut batch stops its refinement, so the batch keeps coarser but complete cuts.
-        The stochastic gather, paced under a time limit, repeats whole passes (new VPL draws,
+        The stochastic gather, in a paced iteration that no other will follow
+        (:meth:`~.pacing.Schedule.fills_time`), repeats whole passes (new VPL draws,
         :data:`PASS_SALT`) while the time left holds another one, and averages them: its
         error is noise, so the budget the bounded gather would spend on refinement goes
-        into averaging instead.
+        into averaging instead (with time for more iterations, they get it: new VPL sets).
         """
         s, g, window = self.settings, self.g, self.scene.camera.window
         Q, S = len(g.pixel), g.samples
@@ -102,8 +103,7 @@ class Gather:
         t0 = time.perf_counter()
         L, cut, done_pt, done = sweep.run(0, show)
         passes = 1
-        if s.gather == "STOCHASTIC" and schedule.paced and schedule.clock.deadline is not None \
-                and done == len(pts_all) and len(pts_all):
+        if s.gather == "STOCHASTIC" and schedule.fills_time() and done == len(pts_all) and len(pts_all):
             t_pass = time.perf_counter() - t0
             while schedule.remaining() > PASS_MARGIN * t_pass and not schedule.clock.cancelled:
                 L2, _, _, done2 = sweep.run(passes, lambda parts, c: None)

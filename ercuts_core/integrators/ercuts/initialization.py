@@ -16,14 +16,92 @@ switched off and by tests.
 """
 from __future__ import annotations
 
+import copy
+import dataclasses
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
+from ...camera import Camera, Window
+from ...description import CameraDesc
+from ...film import Film
 from ...lights import AREA, ENV, POINT, SUN, TRI
 from ...sampling import luminance, power_heuristic
 from ...scene import BuiltScene
 from ...vecmath import dot
 from .paths import PathBatch, is_target
+
+#: Camera samples of the rough BDPT image per iteration at most (issue 17): ``rough_samples``
+#: per pixel while that fits (160×120 keeps its 16), else the image is rendered at a lower
+#: resolution (:func:`rough_factor`), so its cost and P's noise do not grow with the pixels.
+ROUGH_SAMPLE_BUDGET = 1 << 19
+
+
+def rough_factor(n_pixels: int, spp: int) -> int:
+    """Downscale factor k ≥ 1 of the rough image: 1 while ``spp``·``n_pixels`` fits in
+    :data:`ROUGH_SAMPLE_BUDGET`, else ⌈√(spp·n_pixels / budget)⌉ (1920×1080 at 16 spp: 8,
+    a 240×135 rough image)."""
+    need = spp * max(n_pixels, 1)
+    return 1 if need <= ROUGH_SAMPLE_BUDGET else int(math.ceil(math.sqrt(need / ROUGH_SAMPLE_BUDGET)))
+
+
+def rough_camera(desc: CameraDesc, k: int) -> CameraDesc:
+    """``desc`` at 1/``k`` of its resolution with the same view: the pixel aspect absorbs the
+    rounding, so the image plane (Blender's sensor fit of width·aspect_x : height·aspect_y) and
+    the border fractions are unchanged."""
+    w, h = max(1, round(desc.width / k)), max(1, round(desc.height / k))
+    return dataclasses.replace(desc, width=w, height=h,
+                               pixel_aspect_x=desc.pixel_aspect_x * desc.width / w,
+                               pixel_aspect_y=desc.pixel_aspect_y * desc.height / h)
+
+
+def scene_with_camera(scene: BuiltScene, desc: CameraDesc) -> BuiltScene:
+    """A view of ``scene`` (same tracer, lights, materials) seen by another camera; it is never
+    closed itself (the scene owns the tracer)."""
+    view = copy.copy(scene)
+    view.camera = Camera(desc)
+    return view
+
+
+class RoughImage:
+    """Step 1's rough BDPT image, rendered into ``film`` over the window ``low``, which is the
+    render's window ``full`` (k = 1) or the same view at 1/k of the resolution
+    (:func:`rough_camera`). Energies are in full-resolution pixel units (each low-resolution
+    pixel stands for (W/w)·(H/h) full ones); :meth:`full_film` is the image the render shows
+    and falls back to (nearest low-resolution pixel)."""
+
+    def __init__(self, film: Film, full: Window, full_size: tuple[int, int], low_size: tuple[int, int]):
+        self.film, self.full = film, full
+        (W, H), (w, h) = full_size, low_size
+        self.pixel_area = (W / w) * (H / h)        # full pixels per low-resolution pixel
+        self.same = film.window == full
+        if not self.same:
+            pix = np.arange(full.n_pixels)
+            raster = (full.raster(pix) + 0.5) * np.array([w / W, h / H])
+            self.index = film.window.pixel(raster, clip=True)[0]
+
+    @property
+    def passes_done(self) -> int:
+        return self.film.passes_done
+
+    def energy(self) -> float:
+        """Σ over the full window's pixels of Y (:func:`rough_image_energy`)."""
+        return rough_image_energy(self.film.image()) * self.pixel_area
+
+    def indirect_energy(self) -> float:
+        """:func:`indirect_energy` of the rough image, in full-resolution pixels."""
+        return indirect_energy(self.film.light_parts()) * self.pixel_area
+
+    def full_film(self) -> Film:
+        """The rough image as a film of the full window (itself when k = 1)."""
+        if self.same:
+            return self.film
+        out = Film(self.full)
+        low = self.film
+        out.set_pixels(low.light_parts()[:, self.index], (low.alpha / max(low.passes_done, 1))[self.index])
+        out.classified = low.classified
+        return out
 
 
 def rough_image_energy(image: NDArray) -> float:

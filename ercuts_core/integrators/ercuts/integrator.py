@@ -84,26 +84,18 @@ from ..bdpt import BDPTIntegrator
 from ..path import PathIntegrator
 from .er_sampling import chain_starts, run_chains
 from .gather import Gather, Gathered, per_pixel, per_pixel_parts
-from .initialization import indirect_energy, rough_image_energy, seeds_from_path_tracer
+from .initialization import RoughImage, rough_camera, rough_factor, scene_with_camera, seeds_from_path_tracer
 from .light_tree import build_light_tree
 from .mutations import INACTIVE, NAMES, MutationContext
 from .pacing import Schedule
-from .progressive import iteration_settings, iteration_target, more_iterations, stratified_jitter
+from .progressive import (iteration_end, iteration_settings, iteration_target, more_iterations,
+                          paced_iteration, stratified_jitter)
 from .paths import PathBatch
 from .seeding import seed_paths
 from .vpl import GBuffer, build_gbuffer, g_clamp, make_vpls
 
 #: Conservative throughput of the E1 estimate (light-traced samples per second, 2 cores).
 _E1_RATE = 1.0e6
-#: Camera samples of the rough BDPT pass per iteration at most (step 1 measures P and shows a
-#: first image; the final image does not use it): ``samples`` per pixel up to 2^19 in all
-#: (so 160×120 keeps its 16), fewer per pixel at larger resolutions (issue 17).
-ROUGH_SAMPLE_BUDGET = 1 << 19
-
-
-def rough_samples(n_pixels: int, samples: int) -> int:
-    """Rough BDPT samples per pixel: ``samples``, at most ⌈ROUGH_SAMPLE_BUDGET / n_pixels⌉ (≥ 1)."""
-    return int(max(1, min(samples, -(-ROUGH_SAMPLE_BUDGET // max(n_pixels, 1)))))
 #: Largest E1 chunk (samples) for progress reports every ~0.25 s of work.
 PROGRESS_E1_CHUNK = 1 << 16
 
@@ -123,10 +115,12 @@ class ErcutsIntegrator:
     # ------------------------------------------------------------------ driver
     def render(self, film: Film, clock: Clock, timings: dict, stats: dict) -> None:
         """Render ``settings.iterations`` iterations into ``film`` (:mod:`.progressive`; 0: as
-        many as the time limit allows) and average them. The first iteration stopped early
-        (cancel, time limit) leaves the rough BDPT image (before the gather) or the rough
-        image where not gathered; a later one stopped early is discarded, so the image is
-        the average of the completed iterations."""
+        many as the time limit allows) and average them. Under a time limit the first
+        iteration, and one the time left would not hold at full quality, are paced to finish
+        in time (:func:`~.progressive.paced_iteration`); the others run at full quality. The
+        first iteration stopped early (cancel, time limit) leaves the rough BDPT image (before
+        the gather) or the rough image where not gathered; a later one stopped early is
+        discarded, so the image is the average of the completed iterations."""
         base, window = self.settings, self.scene.camera.window
         target = iteration_target(base.iterations, clock.deadline is not None)
         k, durations = 0, []
@@ -137,7 +131,12 @@ class ErcutsIntegrator:
             part = film if k == 0 else Film(window)
             it_timings, it_stats = (timings, stats) if k == 0 else ({}, {})
             span = None if target is None else (k / target, (k + 1) / target)
-            complete = self._iteration(part, clock, it_timings, it_stats, paced=k == 0, span=span)
+            paced = paced_iteration(k, target, clock, durations)
+            self.schedule = Schedule(clock, base.direct_vpls, paced=paced, span=span,
+                                     end=iteration_end(k, target, clock, t0),
+                                     last=target is not None and k + 1 >= target)
+            complete = self._iteration(part, clock, it_timings, it_stats)
+            stats["iterations_paced"] = stats.get("iterations_paced", 0) + int(self.schedule.paced)
             if k > 0:
                 for name, seconds in it_timings.items():
                     timings[name] = timings.get(name, 0.0) + seconds
@@ -153,19 +152,17 @@ class ErcutsIntegrator:
             clock.show(film.image)
         self.settings = base
 
-    def _iteration(self, film: Film, clock: Clock, timings: dict, stats: dict, paced: bool,
-                   span: tuple[float, float] | None) -> bool:
-        """One complete Ercuts estimate into ``film`` (the five phases); ``paced``: its phases
-        share the time left (the first iteration), else they run at full quality and the
-        iteration is abandoned if the time runs out; ``span``: its part of the progress
-        (:class:`~.pacing.Schedule`). Returns False when stopped early."""
+    def _iteration(self, film: Film, clock: Clock, timings: dict, stats: dict) -> bool:
+        """One complete Ercuts estimate into ``film`` (the five phases) on the iteration's
+        :attr:`schedule` (:class:`~.pacing.Schedule`: paced, its phases share the
+        iteration's time; else they run at full quality and the iteration is abandoned if the
+        time runs out). Returns False when stopped early."""
         self.clock, self.timings, self.stats = clock, timings, stats
-        self.schedule = Schedule(clock, self.settings.direct_vpls, paced=paced, span=span)
-        self.rough: Film | None = None
+        self.rough: RoughImage | None = None
         try:
             self._render(film)
         except _Stopped:
-            film.merge(self.rough)
+            film.merge(self.rough.full_film())
             return False
         return not clock.cancelled
 
@@ -175,10 +172,11 @@ class ErcutsIntegrator:
         with self._phase("bdpt"):                 # 1. rough BDPT image and P
             rough = self.rough = self._rough_bdpt()
         stats["bdpt_samples"] = rough.passes_done
-        self.clock.show(rough.image)
-        P_all = rough_image_energy(rough.image())
+        stats["rough_resolution"] = rough.film.window.width
+        self.clock.show(rough.full_film().image)
+        P_all = rough.energy()
         if not s.direct_vpls:     # light seen directly and scattered once: its own passes
-            P = indirect_energy(rough.light_parts())
+            P = rough.indirect_energy()
             self.schedule.grow_direct(1.0 - P / P_all if P_all > 0 else 0.0)
             with self._phase("direct"):
                 base, alpha = self._direct_light()
@@ -208,7 +206,7 @@ class ErcutsIntegrator:
         scale = self._energy_scale(gathered.parts.sum(axis=0), vpls, P)
         light = self._compose(base, gathered.parts, vpls, scale)
         if not gathered.complete.all():     # cancelled: the rough image where not gathered
-            light = np.where(gathered.complete[None, :, None], light, rough.light_parts())
+            light = np.where(gathered.complete[None, :, None], light, rough.full_film().light_parts())
         film.set_pixels(light, alpha)
         self._finish(film, g, chains, vpls, gathered, scale)
 
@@ -230,11 +228,16 @@ class ErcutsIntegrator:
             raise _Stopped
 
     # ------------------------------------------------------------------ phase 1
-    def _rough_bdpt(self) -> Film:
-        """:func:`rough_samples` BDPT passes (fewer if the phase's time share runs out)."""
-        n = self.scene.camera.window.n_pixels
-        return self._passes(BDPTIntegrator(self.scene, self.settings), "BDPT", (), "bdpt",
-                            show=True, samples=rough_samples(n, self.settings.samples))
+    def _rough_bdpt(self) -> RoughImage:
+        """``rough_samples`` BDPT passes (fewer if the phase's time share runs out), at 1/k of
+        the resolution when the full one would exceed the sample budget
+        (:func:`~.initialization.rough_factor`)."""
+        s, cam = self.settings, self.scene.camera
+        k = rough_factor(cam.window.n_pixels, s.rough_samples)
+        view = self.scene if k == 1 else scene_with_camera(self.scene, rough_camera(cam.desc, k))
+        film = self._passes(BDPTIntegrator(view, s), "BDPT", (), "bdpt", show=k == 1,
+                            samples=s.rough_samples)
+        return RoughImage(film, cam.window, (cam.width, cam.height), (view.camera.width, view.camera.height))
 
     def _direct_light(self) -> tuple[NDArray, NDArray]:
         """``direct_samples`` jittered passes of the light that reaches the camera directly or after
@@ -251,8 +254,8 @@ class ErcutsIntegrator:
 
     def _passes(self, integrator, phase: str, key: tuple, share: str, show: bool, samples: int) -> Film:
         """:func:`~ercuts_core.integrators.base.run_passes` within ``share``'s deadline."""
-        s, window = self.settings, self.scene.camera.window
-        return run_passes(integrator, Film(window), self.clock, samples=samples,
+        s = self.settings
+        return run_passes(integrator, Film(integrator.window), self.clock, samples=samples,
                           batch=batch_pixels(self.memory, s), phase=phase,
                           key=key, fraction=lambda f: self.schedule.fraction(phase, f),
                           deadline=self.schedule.deadline(share), show=show)
@@ -319,7 +322,7 @@ class ErcutsIntegrator:
         (fewer when the phase's time share asks for it)."""
         s, stats, sched = self.settings, self.stats, self.schedule
         n_e1 = s.e1_samples
-        if sched.paced and self.clock.deadline is not None:
+        if sched.paced:
             budget = max(sched.deadline("vpl") - time.perf_counter(), 0.0)
             n_e1 = int(min(n_e1, max(16, budget * _E1_RATE / max(int((chains.count > 0).sum()), 1))))
         stats["e1_samples"] = n_e1
@@ -352,7 +355,7 @@ class ErcutsIntegrator:
         """Phase 5 (:class:`~.gather.Gather`), previewing the gathered pixels over the rough
         image after every batch."""
         window = self.scene.camera.window
-        rough_parts = self.rough.light_parts()
+        rough_parts = self.rough.full_film().light_parts()
 
         def show(point_parts, complete):
             def image():

@@ -14,6 +14,8 @@ import time
 
 import numpy as np
 
+from .progressive import fills_time
+
 #: Shares of the time limit per phase (the gather gets the rest); a phase's deadline gives
 #: it its share of the time *left*, so time an earlier phase did not need flows on. The
 #: direct-light share grows by :data:`DIRECT_SHARE_GROWTH` × the rough image's direct
@@ -42,15 +44,22 @@ class Schedule:
         span: (start, end) of the render's progress that this iteration covers (iteration k
             of N: (k/N, (k+1)/N)); None: progress is the share of the time limit used (as
             many iterations as the time allows).
+        end: this iteration's own deadline (``time.perf_counter()`` seconds; default: the
+            clock's): with N iterations asked for, iteration k gets 1/(N − k) of the time left.
+        last: no iteration follows this one (it may fill its time: :meth:`fills_time`).
     """
 
     def __init__(self, clock, direct_vpls: bool, paced: bool = True,
-                 span: tuple[float, float] | None = (0.0, 1.0)):
+                 span: tuple[float, float] | None = (0.0, 1.0), end: float | None = None,
+                 last: bool = False):
         self.clock = clock
         self.direct_vpls = direct_vpls
-        self.paced = paced
+        self.paced = paced and clock.deadline is not None
         self.span = span
         self.share = dict(SHARE)       # time shares of this render
+        self.started = time.perf_counter()
+        self.end = clock.deadline if end is None or clock.deadline is None else min(end, clock.deadline)
+        self.last = last
 
     def grow_direct(self, f_direct: float) -> None:
         """Give the direct-light phase :data:`DIRECT_SHARE_GROWTH` × ``f_direct`` (the rough
@@ -69,19 +78,25 @@ class Schedule:
 
     def deadline(self, phase: str) -> float | None:
         """End of ``phase``'s share (:data:`SHARE`) of the time left, or None without a limit."""
-        clock = self.clock
-        if clock.deadline is None or not self.paced:
+        if not self.paced:
             return None
         share = self.share
         order = [p for p in share if p != "direct" or not self.direct_vpls]
         later = sum(share[p] for p in order[order.index(phase):])
         gather = 1.0 - sum(SHARE[p] for p in order)
         now = time.perf_counter()
-        return now + max(clock.deadline - now, 0.0) * share[phase] / (later + gather)
+        return now + max(self.end - now, 0.0) * share[phase] / (later + gather)
 
     def remaining(self) -> float:
-        """Seconds the pacing may plan with: the clock's, inf when not :attr:`paced`."""
-        return self.clock.remaining() if self.paced else float("inf")
+        """Seconds the pacing may plan with: those left of this iteration's time (:attr:`end`),
+        inf when not :attr:`paced`."""
+        return self.end - time.perf_counter() if self.paced else float("inf")
+
+    def fills_time(self) -> bool:
+        """Spend the rest of this iteration's time (repeated stochastic gather passes)? Only
+        when paced, and when it is the :attr:`last` or no later iteration would start
+        (:func:`~.progressive.fills_time`)."""
+        return self.paced and (self.last or fills_time(self.clock, self.started, time.perf_counter()))
 
     def report(self, phase: str, f: float, message: str) -> bool:
         """Report fraction ``f`` of ``phase``; False once cancelled or past the time limit."""

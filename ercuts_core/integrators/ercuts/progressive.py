@@ -21,8 +21,11 @@ from ...settings import RenderSettings
 #: Knaus and Zwicker's α: the squared clamp distance shrinks as k^(α−1).
 CLAMP_ALPHA = 2.0 / 3.0
 #: A new iteration starts only if the time left is at least this share of the last one's
-#: duration (one that cannot finish is discarded: the time is better left unused).
+#: duration (the time is better left unused than spent on an iteration of a few samples).
 START_SHARE = 0.5
+#: An iteration is paced (its phases share the time left, so it finishes in time) when the
+#: time left is under this many times the last iteration's duration.
+PACE_MARGIN = 1.25
 
 
 def iteration_seed(seed: int, k: int) -> int:
@@ -71,6 +74,34 @@ def iteration_target(iterations: int, time_limited: bool) -> int | None:
     if iterations > 0:
         return iterations
     return None if time_limited else 1
+
+
+def paced_iteration(k: int, target: int | None, clock, durations: list[float]) -> bool:
+    """Pace iteration ``k`` (of ``target``, None: until the time limit) to its time? Under a
+    time limit: with a target, every one (each gets its part of the time left); without, the
+    first (its cost is unknown: it must finish in time) and any later one that the time left
+    would not hold at full quality (under :data:`PACE_MARGIN` × the last duration). The
+    others run at full quality, so a long budget is spent on many complete iterations, not
+    one stretched one."""
+    if clock.deadline is None:
+        return False
+    return target is not None or k == 0 or clock.remaining() < PACE_MARGIN * durations[-1]
+
+
+def iteration_end(k: int, target: int | None, clock, now: float) -> float | None:
+    """Deadline of iteration ``k``: the clock's, or with ``target`` iterations 1/(target − k)
+    of the time left (time an iteration does not need flows on to the next)."""
+    if clock.deadline is None or target is None:
+        return clock.deadline
+    return now + max(clock.deadline - now, 0.0) / max(target - k, 1)
+
+
+def fills_time(clock, started: float, now: float) -> bool:
+    """Should a paced iteration begun at ``started`` spend the rest of the time limit (the
+    stochastic gather's repeated passes) instead of leaving it to later iterations? Yes when
+    no further iteration would start (:func:`more_iterations`): the time left is under
+    :data:`START_SHARE` × its duration so far."""
+    return clock.deadline is not None and clock.remaining() < START_SHARE * (now - started)
 
 
 def more_iterations(done: int, target: int | None, clock, durations: list[float]) -> bool:

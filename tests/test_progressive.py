@@ -97,8 +97,10 @@ def test_preview_images_and_rate_limit(integrator, monkeypatch):
         if integrator == "BDPT" and interval == 0.0:
             np.testing.assert_array_equal(images[-1], result.image)   # the last pass is the result
     assert counts[1e9] == 1
-    # ERCUTS: every rough pass, the rough image, and the 2 gather batches (256 + 176 points)
-    assert counts[0.0] == (3 if integrator == "BDPT" else FAST["rough_samples"] + 1 + 2)
+    # ERCUTS: every rough pass, the rough image, the 2 batches (256 + 176 points) of the first
+    # gather pass and one image after each further stochastic pass
+    passes = RenderSettings().stochastic_passes
+    assert counts[0.0] == (3 if integrator == "BDPT" else FAST["rough_samples"] + 1 + 2 + passes - 1)
 
 
 @pytest.mark.parametrize("phase", ERCUTS_PHASES)

@@ -34,9 +34,9 @@ GLOSSY_ROUGHNESS = 0.5
 ERROR_MODES = {"NODE": "bound", "TOTAL": "total", "LITERAL": "literal"}
 #: Seed salt of the stochastic gather's draws (with the seed, the pass and the batch start).
 PASS_SALT = 0x5C7
-#: Another stochastic gather pass starts only if the time left is this many times the first
-#: pass's duration (an unfinished pass is discarded).
-PASS_MARGIN = 1.2
+#: Another stochastic gather pass starts only if the iteration's time left is at least this
+#: share of the first pass's duration (a pass the time cuts short keeps the points it reached).
+PASS_START = 0.1
 #: Consecutive shading points kept together in the shuffled gather order (coherent rays).
 GATHER_RUN = 32
 #: Glossy shading points get the per-cluster GGX material bound (:class:`.lightcuts.
@@ -88,11 +88,11 @@ class Gather:
 
         Cancelling (or running out of time) stops after the current batch; a cancel during a
         lightcut batch stops its refinement, so the batch keeps coarser but complete cuts.
-        The stochastic gather, in a paced iteration that no other will follow
-        (:meth:`~.pacing.Schedule.fills_time`), repeats whole passes (new VPL draws,
-        :data:`PASS_SALT`) while the time left holds another one, and averages them: its
-        error is noise, so the budget the bounded gather would spend on refinement goes
-        into averaging instead (with time for more iterations, they get it: new VPL sets).
+        The stochastic gather makes ``stochastic_passes`` whole passes (new VPL draws,
+        :data:`PASS_SALT`; fewer if the iteration's time runs out) and averages them; in a
+        paced iteration that no other will follow (:meth:`~.pacing.Schedule.fills_time`) it
+        repeats passes while the time left holds another one: its error is noise, so the
+        budget the bounded gather would spend on refinement goes into averaging instead.
         """
         s, g, window = self.settings, self.g, self.scene.camera.window
         Q, S = len(g.pixel), g.samples
@@ -102,16 +102,9 @@ class Gather:
         sweep = _Sweep(self, vpls, tree, gmax, schedule, stats, pts_all)
         t0 = time.perf_counter()
         L, cut, done_pt, done = sweep.run(0, show)
-        passes = 1
-        if s.gather == "STOCHASTIC" and schedule.fills_time() and done == len(pts_all) and len(pts_all):
-            t_pass = time.perf_counter() - t0
-            while schedule.remaining() > PASS_MARGIN * t_pass and not schedule.clock.cancelled:
-                L2, _, _, done2 = sweep.run(passes, lambda parts, c: None)
-                if done2 < len(pts_all):
-                    break                               # an unfinished pass is discarded
-                L = L + (L2 - L) / (passes + 1)         # running mean of the passes
-                passes += 1
-                show(L, done_pt.reshape(-1, S).all(axis=1))
+        passes = 1.0
+        if s.gather == "STOCHASTIC" and done == len(pts_all) and len(pts_all):
+            L, passes = self._more_passes(sweep, L, time.perf_counter() - t0, schedule, show, done_pt)
         stats["gather_passes"] = passes
         sweep.record(stats, done, cut)
         glossy = self._glossy()
@@ -119,6 +112,29 @@ class Gather:
                         glossy=per_pixel(L.sum(axis=0) * glossy[:, None], window.n_pixels, S),
                         cut=per_pixel(cut[:, None], window.n_pixels, S),
                         complete=done_pt.reshape(-1, S).all(axis=1))
+
+    def _more_passes(self, sweep: "_Sweep", L: NDArray, t_pass: float, schedule: Schedule, show,
+                     done_pt: NDArray) -> tuple[NDArray, float]:
+        """Passes 2 … ``stochastic_passes`` of the stochastic gather (more while the time left
+        holds them when the iteration fills its time), each point's estimate the mean of its
+        passes. A pass the iteration's time cuts short keeps the points it reached (spread over
+        the image by :func:`spread_order`): each pass is an unbiased estimate per point, so a
+        mean over 1 or 2 passes is too. Returns the mean (2, Q, 3) and the passes made
+        (fractional for a cut-short last one)."""
+        s, n_pts = self.settings, len(sweep.pts_all)
+        fill = schedule.fills_time()
+        total, count, passes = L.copy(), np.ones(len(self.g.pixel)), 1.0
+        while (fill or passes < s.stochastic_passes) and not schedule.clock.cancelled \
+                and schedule.remaining() > PASS_START * t_pass:
+            L2, _, _, done2 = sweep.run(int(passes), lambda parts, c: None)
+            pts = sweep.pts_all[:done2]
+            total[:, pts] += L2[:, pts]
+            count[pts] += 1
+            passes += done2 / n_pts
+            show(total / count[None, :, None], done_pt.reshape(-1, self.g.samples).all(axis=1))
+            if done2 < n_pts:
+                break
+        return total / count[None, :, None], passes
 
     def _glossy(self) -> NDArray:
         """(Q,) shading points with a specular lobe of roughness < :data:`GLOSSY_ROUGHNESS`."""
@@ -170,18 +186,25 @@ class _Sweep:
         self.rays, self.clamped, self.unmet = 0, 0.0, 0
         self.stats = stats
         self.pace = GatherPace(s.max_error, s.max_cut_size)
+        self.pass_index = 0
+        self.planned = s.stochastic_passes if s.gather == "STOCHASTIC" else 1
 
-    def _report(self, f_done: float) -> bool:
+    def _report(self, f_done: float, within_iteration: bool = False) -> bool:
+        """Report progress; False when cancelled or out of time (the render's, and with
+        ``within_iteration`` the iteration's: a repeated pass must not overrun it)."""
         clock = self.schedule.clock
-        f = f_done / max(len(self.pts_all), 1)
+        # pass p of the planned ones covers [p, p + 1] / planned of the phase (further passes
+        # that fill the time stay at its end)
+        f = min((self.pass_index + f_done / max(len(self.pts_all), 1)) / self.planned, 1.0)
         return clock.poll(self.schedule.fraction("Lightcuts", f),
                           f"Lightcuts {100 * f:.0f}% | {self.rays / 1e6:.2f}M shadow rays") \
-            and clock.remaining() > 0
+            and clock.remaining() > 0 and (not within_iteration or self.schedule.remaining() > 0)
 
     def run(self, pass_index: int, show) -> tuple[NDArray, NDArray, NDArray, int]:
         """Gather pass ``pass_index``: (2, Q, 3) light parts, (Q,) cut sizes, (Q,) points
         done and the number of ``pts_all`` done (fewer when stopped)."""
         ga, s, pts_all = self.gather, self.gather.settings, self.pts_all
+        self.pass_index = pass_index
         g = ga.g
         Q, S = len(g.pixel), g.samples
         L = np.zeros((2, Q, 3))              # [from emitter VPLs, from the others]
@@ -200,7 +223,7 @@ class _Sweep:
             if pass_index == 0:
                 pace.update(len(idx), time.perf_counter() - t_batch, cut[idx].mean(),
                             len(pts_all) - done, self.schedule.remaining())
-            if not self._report(done) and done < len(pts_all):
+            if not self._report(done, within_iteration=pass_index > 0) and done < len(pts_all):
                 if pass_index == 0:
                     self.stats["gather_incomplete"] = 1
                     self.schedule.clock.cancelled = True

@@ -36,7 +36,6 @@ ROOT = os.path.dirname(HERE)
 sys.path[:0] = [ROOT, HERE]
 
 import metrics  # noqa: E402
-from make_references import ref_paths  # noqa: E402
 
 RESULTS = os.path.join(HERE, "results")
 RUNS = os.path.join(RESULTS, "resolution_runs")
@@ -147,15 +146,11 @@ def load_runs() -> list[dict]:
 
 
 def reference(scene: str, w: int, h: int):
-    exr, js = ref_paths(scene, w, h)
-    if not os.path.exists(exr):
-        return None
-    from ercuts_core.image_io import read_exr
+    """The stored Cycles reference at (w, h) (:func:`report.load_reference`), or None."""
+    from report import load_reference
 
-    ch = read_exr(exr)
-    ref = ch["RGBA"][..., :3].astype(np.float64)
-    var = ch["var"][..., :3].astype(np.float64) if "var" in ch else np.zeros_like(ref)
-    return dict(image=ref, floor=metrics.reference_floor(ref, var)["relmse"])
+    ref = load_reference(scene, w, h)
+    return None if ref is None else dict(image=ref["image"], floor=ref["floor"]["relmse"])
 
 
 def evaluate(runs: list[dict]) -> None:

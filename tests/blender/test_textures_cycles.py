@@ -73,6 +73,15 @@ def _quadrants(img):
     return q
 
 
+#: Normal-map and bump cases: a delta sun, a diffuse plane, max_depth 1 and one texel per
+#: quadrant make every pixel deterministic (zero estimator variance) in both renderers; the
+#: measured differences are float32 rounding, ≤ 2.6e-5 relative (bpy 5.0.1 and Blender
+#: 3.4.1). 1e-3 keeps a 40× margin and is 3.6× below the smallest model difference the tests
+#: must see: Cycles 3.4's bump shadowing (Chiang 2019) darkens one quadrant by 0.36 %, 5.0's
+#: (Estevez 2019) every quadrant by 1.2 % (ercuts_core/bump_shadowing.py).
+NORMAL_RTOL, NORMAL_ATOL = 1e-3, 1e-4
+
+
 def _skip_unless_textured(q):
     if np.ptp(q.reshape(-1, 3), axis=0).max() < 1e-3:
         pytest.skip("the core does not evaluate shading programs yet (uniform image)")
@@ -154,7 +163,7 @@ def test_normal_mapped_rotated_plane_agrees_with_cycles(tmp_path, integrator, mi
     qe, qc = _quadrants(ercuts), _quadrants(cycles)
     print("ercuts", np.round(qe, 4).tolist(), "cycles", np.round(qc, 4).tolist())
     assert abs(qc[0, 0, 0] - qc[1, 0, 0]) > 0.1 * qc.max()     # the tilt is visible in Cycles
-    assert np.allclose(qe, qc, rtol=0.03, atol=3e-3)
+    assert np.allclose(qe, qc, rtol=NORMAL_RTOL, atol=NORMAL_ATOL)
 
 
 def test_alpha_cutout_agrees_with_cycles(tmp_path):
@@ -182,10 +191,18 @@ def test_alpha_cutout_agrees_with_cycles(tmp_path):
     assert np.allclose(qe, qc, rtol=0.05, atol=5e-3)
 
 
-@pytest.mark.parametrize("distance", [0.5, 2.0])
+_VIEW_REFLECTION_CLAMP = pytest.mark.xfail(
+    bpy.app.version < (3, 6, 0), strict=True,
+    reason="Cycles 3.0-3.5 bends every closure's normal so that the view's mirror reflection stays "
+           "0.01 above the surface (ensure_valid_reflection); here the bump tilts the normal 45°, "
+           "the head-on view's reflection grazes, and Cycles renders 0.14 % brighter; the core "
+           "does not bend normals")
+
+
+@pytest.mark.parametrize("distance", [0.5, pytest.param(2.0, marks=_VIEW_REFLECTION_CLAMP)])
 def test_bump_from_uv_height_agrees_with_cycles(tmp_path, distance):
     """Bump with Height = U (a linear ramp: finite differences are exact whatever the offset),
-    on a plane rotated about Z, lit by a sun from the side."""
+    on a plane rotated about Z, lit by a sun from the side (Distance 2: a 45° tilt)."""
     mat = h.node_material("Bumped", "ShaderNodeBsdfDiffuse", Color=(0.8, 0.8, 0.8))
     nt = mat.node_tree
     diffuse = next(n for n in nt.nodes if n.type == "BSDF_DIFFUSE")
@@ -205,7 +222,7 @@ def test_bump_from_uv_height_agrees_with_cycles(tmp_path, distance):
     print("ercuts", np.round(qe, 4).tolist(), "cycles", np.round(qc, 4).tolist())
     flat = 0.8 * 3.0 / np.pi * np.cos(np.radians(30))
     assert abs(qc.mean() / flat - 1) > 0.05                    # the bump is visible in Cycles
-    assert np.allclose(qe, qc, rtol=0.03, atol=3e-3)
+    assert np.allclose(qe, qc, rtol=NORMAL_RTOL, atol=NORMAL_ATOL)
 
 
 def _checker(n=8, a=(0.9, 0.9, 0.9), b=(0.1, 0.3, 0.8)):
@@ -270,7 +287,7 @@ def test_object_space_normal_map_on_a_rotated_plane_agrees_with_cycles(tmp_path)
     qe, qc = _quadrants(ercuts), _quadrants(cycles)
     print("ercuts", np.round(qe, 4).tolist(), "cycles", np.round(qc, 4).tolist())
     assert abs(qc[0, 0, 0] - qc[1, 0, 0]) > 0.1 * qc.max()
-    assert np.allclose(qe, qc, rtol=0.03, atol=3e-3)
+    assert np.allclose(qe, qc, rtol=NORMAL_RTOL, atol=NORMAL_ATOL)
 
 
 def _blocks(img, n=4):

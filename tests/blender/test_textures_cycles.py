@@ -99,6 +99,23 @@ def test_textured_emission_matches_texels_and_cycles(tmp_path):
     assert np.allclose(qe, want, rtol=0.02, atol=2e-3)
 
 
+def test_linear_interpolation_of_srgb_texels_agrees_with_cycles(tmp_path):
+    """The 2×2 sRGB image magnified with Linear interpolation (EXTEND): Cycles interpolates
+    8-bit sRGB texels *encoded* and decodes after (compress_as_srgb); between the white and
+    the blue texel that is up to 29 % darker than interpolating linear values. Means of 8×8
+    blocks (8×6 pixels): the pixel-jitter noise of a block is ≤ 0.28 % at 64 spp (measured
+    seed to seed: 0.56 % at 16 spp); interpolating linear values is off by up to 197 % in
+    the dark channels of the middle blocks."""
+    _scene("ShaderNodeEmission")
+    tex = next(n for n in bpy.data.materials["Tex"].node_tree.nodes if n.type == "TEX_IMAGE")
+    tex.interpolation, tex.extension = "Linear", "EXTEND"
+    ercuts, cycles = render_both(tmp_path, max_depth=1, samples=64, cycles_samples=64,
+                                 integrator="PATH", tag="tex_linear")
+    be, bc = _blocks(ercuts, 8), _blocks(cycles, 8)
+    print("max relative block difference", np.abs(be / bc - 1).max())
+    assert np.allclose(be, bc, rtol=0.01, atol=1e-3)
+
+
 @pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
 def test_textured_diffuse_under_sun_agrees_with_cycles(tmp_path, integrator):
     _scene("ShaderNodeBsdfDiffuse")
@@ -328,3 +345,36 @@ def test_object_space_coordinates_on_a_transformed_box_agree_with_cycles(tmp_pat
     be, bc = _blocks(e), _blocks(c)
     print("max block difference", np.abs(be - bc).max(), "block mean", bc.mean())
     assert np.allclose(be, bc, rtol=0.06, atol=0.01)
+
+
+_LOBE_GAP = pytest.mark.xfail(strict=True, reason=(
+    "documented gap (README, Materials): the core's Principled is Lambert + one single-scattering "
+    "GGX lobe with a constant dielectric F0; Cycles 4+ adds Multiscatter GGX energy and a "
+    "Fresnel-weighted dielectric layer (measured here: -11 % rough metal, +3.2 % dielectric at "
+    "roughness 0.2)"))
+
+
+@pytest.mark.parametrize("metallic, roughness, distribution", [
+    (1.0, 0.3, "GGX"), (1.0, 0.6, "GGX"), (0.5, 0.5, "GGX"),
+    pytest.param(1.0, 0.6, "MULTI_GGX", marks=_LOBE_GAP),
+    pytest.param(0.0, 0.2, "GGX", marks=_LOBE_GAP),
+])
+def test_principled_lobe_agrees_with_cycles(tmp_path, metallic, roughness, distribution):
+    """A constant Principled floor under a sun seen at 37° (max_depth 1: every pixel is the
+    BSDF times the sun's irradiance, no estimator noise but the pixel jitter). Metals with
+    Cycles' single-scattering GGX agree to 0.01 % (measured); the xfails are the gap."""
+    if bpy.app.version < (4, 0, 0):
+        pytest.skip("Blender 3.x's Principled is Burley diffuse + Schlick (Principled v1)")
+    mat = h.node_material("P", "ShaderNodeBsdfPrincipled", base_color=(0.6, 0.5, 0.4),
+                          Roughness=roughness, Metallic=metallic)
+    next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED").distribution = distribution
+    h.plane("Floor", size=20, material=mat)
+    h.camera(location=(0, -4, 3), target=(0, 0, 0))
+    sun = h.light("SUN", location=(0, 0, 5), energy=3.0)
+    sun.rotation_euler = (np.radians(-30), 0, 0)
+    h.world((0, 0, 0))
+    e, c = render_both(tmp_path, max_depth=1, samples=64, cycles_samples=256, integrator="PATH",
+                       tag=f"lobe_{metallic}_{roughness}_{distribution}")
+    me, mc = e[..., :3].mean(), c[..., :3].mean()
+    print(f"principled metallic {metallic} roughness {roughness} {distribution}: rel {me / mc - 1:+.4f}")
+    assert me == pytest.approx(mc, rel=0.005)

@@ -130,7 +130,8 @@ def test_textured_diffuse_under_sun_agrees_with_cycles(tmp_path, integrator):
     assert np.allclose(qe, qc, rtol=0.03, atol=2e-3)
 
 
-def test_mix_shader_with_textured_factor_agrees_with_cycles(tmp_path):
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
+def test_mix_shader_with_textured_factor_agrees_with_cycles(tmp_path, integrator):
     """Mix(f = the texture's luminance, red diffuse, white diffuse) under a sun."""
     mat = h.node_material("Mixed", "ShaderNodeMixShader")
     nt = mat.node_tree
@@ -144,7 +145,7 @@ def test_mix_shader_with_textured_factor_agrees_with_cycles(tmp_path):
     _scene("", material=mat)
     h.light("SUN", location=(0, 0, 5), energy=3.0)
     ercuts, cycles = render_both(tmp_path, max_depth=1, samples=16, cycles_samples=16,
-                                 integrator="PATH", tag="tex_mix")
+                                 integrator=integrator, tag=f"tex_mix_{integrator}")
     qe, qc = _quadrants(ercuts), _quadrants(cycles)
     print("ercuts", np.round(qe, 4).tolist(), "cycles", np.round(qc, 4).tolist())
     f = TEXELS[..., :3] @ np.array([0.2126729, 0.7151522, 0.0721750])   # colour → float
@@ -153,7 +154,8 @@ def test_mix_shader_with_textured_factor_agrees_with_cycles(tmp_path):
     assert np.allclose(qe, qc, rtol=0.03, atol=2e-3)
 
 
-@pytest.mark.parametrize("integrator,mirror", [("PATH", False), ("BDPT", False), ("PATH", True)])
+@pytest.mark.parametrize("integrator,mirror", [("PATH", False), ("BDPT", False), ("ERCUTS", False),
+                                                ("PATH", True)])
 def test_normal_mapped_rotated_plane_agrees_with_cycles(tmp_path, integrator, mirror):
     """A constant tangent-space normal map tilting the normal towards +U, on a plane rotated
     about Z (world-space tangents) and lit by a sun from the side: cos θ follows the tilt."""
@@ -183,7 +185,8 @@ def test_normal_mapped_rotated_plane_agrees_with_cycles(tmp_path, integrator, mi
     assert np.allclose(qe, qc, rtol=NORMAL_RTOL, atol=NORMAL_ATOL)
 
 
-def test_alpha_cutout_agrees_with_cycles(tmp_path):
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
+def test_alpha_cutout_agrees_with_cycles(tmp_path, integrator):
     """A plane cut out by its texture's alpha (Mix of Transparent and diffuse by Alpha) over a
     white floor, lit by a sun: the camera sees the floor through the holes, and the shadow."""
     mat = h.node_material("Leaf", "ShaderNodeMixShader")
@@ -202,7 +205,7 @@ def test_alpha_cutout_agrees_with_cycles(tmp_path):
     sun = h.light("SUN", location=(0, 0, 5), energy=3.0)
     sun.rotation_euler = (np.radians(20), 0, 0)
     ercuts, cycles = render_both(tmp_path, max_depth=2, samples=32, cycles_samples=64,
-                                 integrator="PATH", tag="tex_cutout")
+                                 integrator=integrator, tag=f"tex_cutout_{integrator}")
     qe, qc = _quadrants(ercuts), _quadrants(cycles)
     print("ercuts", np.round(qe, 4).tolist(), "cycles", np.round(qc, 4).tolist())
     assert np.allclose(qe, qc, rtol=0.05, atol=5e-3)

@@ -33,6 +33,10 @@ AREA_LIGHT_PI_NORMALISATION = VERSION >= (4, 0, 0)
 #: the spot axis); from 4.0 on it is the smoothstep alone (measured with Cycles 3.4.1
 #: and 5.0.1: off-axis ratio spot/point = cos θ·smoothstep vs smoothstep).
 SPOT_COSINE_FALLOFF = VERSION < (4, 0, 0)
+#: Cycles' darkening of diffuse light on normal-mapped/bumped surfaces
+#: (``bump_shadowing_term``, kernel/closure/bsdf.h; models in ercuts_core/bump_shadowing.py):
+#: Chiang et al. 2019 up to 4.4, Estevez et al. 2019 from 4.5 on (Cycles commit 11e282522).
+BUMP_SHADOWING = "ESTEVEZ2019" if VERSION >= (4, 5, 0) else "CHIANG2019"
 
 
 # --------------------------------------------------------------------------- render result

@@ -11,7 +11,8 @@ can be regenerated without rendering. Errors are computed at report time against
 Cycles reference ``blend_scenes/references/<scene>_<W>x<H>.exr`` (``make_references.py``).
 
 Engines: ERCUTS, BDPT and PATH through ``ercuts_core.render`` on the core's built-in scene
-(identical to the .blend, checked by tests/blender/test_blend_scenes.py) with
+(identical to the .blend, checked by tests/blender/test_blend_scenes.py), or for the textured
+interiors (:data:`BLEND_ONLY`, no built-in) on the .blend as the add-on exports it, with
 ``RenderSettings.time_limit`` = budget (it covers every phase); CYCLES through the bpy module
 on the .blend (:mod:`cycles_runner`). All renders run one after another in this process.
 Writes ``benchmarks/results/report.md``, ``report_convergence.png`` and ``report_<scene>.png``.
@@ -56,7 +57,13 @@ SCENES = {
     "baffled_lamp": ("indirect", "ceiling lamp hidden above a baffle; the room is lit via the ceiling"),
     "cornell_box": ("mixed", "Cornell box with a small emissive ceiling panel"),
     "directly_lit": ("direct", "blocks on an open floor under a large panel (easy, direct light)"),
+    "textured_living_room": ("indirect", "textured living room (wood, plaster bump, fabric Mix Shader, "
+                             "normal maps) lit by an uplight aimed at the ceiling"),
+    "textured_bedroom": ("indirect", "textured bedroom (tiles with a normal map, wallpaper, fabric) "
+                         "lit by the sun and sky through a window"),
 }
+#: Scenes without a core built-in: the engines render the .blend as the add-on exports it.
+BLEND_ONLY = ("textured_living_room", "textured_bedroom")
 #: Targets (issue 13): indirect scenes ERCUTS relMSE ≤ TARGET_RATIO × Cycles' at every budget
 #: from RATIO_FROM s on, ≥ TARGET_FALL× lower at the longest budget than at RATIO_FROM s, energy
 #: within TARGET_ENERGY from ENERGY_FROM s on; the Cornell box (mixed) ≤ TARGET_MIXED× and the
@@ -91,12 +98,39 @@ def _scalar_stats(d: dict) -> dict:
     return {k: v for k, v in d.items() if isinstance(v, (int, float, str, bool))}
 
 
-def render_ercuts(scene: str, engine: str, budget: float, seed: int, w: int, h: int) -> tuple:
-    from ercuts_core import RenderSettings, render
+_EXPORTED: dict = {}
+
+
+def scene_description(scene: str, w: int, h: int):
+    """The core's built-in scene, or for :data:`BLEND_ONLY` scenes ``blend_scenes/<scene>.blend``
+    exported by the add-on (bpy module; once per process and size; export time not counted)."""
     from ercuts_core.scenes import SCENES as BUILTIN
 
+    if scene not in BLEND_ONLY:
+        return BUILTIN[scene](w, h)
+    if (scene, w, h) not in _EXPORTED:
+        import bpy
+
+        import addon
+        from addon.export import export_scene
+
+        if not hasattr(bpy.types.Scene, "ercuts"):
+            addon.register()
+        bpy.ops.wm.open_mainfile(filepath=os.path.join(ROOT, "blend_scenes", scene + ".blend"))
+        s = bpy.context.scene
+        s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = w, h, 100
+        exported = export_scene(bpy.context.evaluated_depsgraph_get())
+        if exported.warnings:
+            raise RuntimeError(f"{scene}.blend exports with warnings: {exported.warnings}")
+        _EXPORTED[(scene, w, h)] = exported.description
+    return _EXPORTED[(scene, w, h)]
+
+
+def render_ercuts(scene: str, engine: str, budget: float, seed: int, w: int, h: int) -> tuple:
+    from ercuts_core import RenderSettings, render
+
     settings = RenderSettings(**ERCUTS_SETTINGS[engine], seed=seed, time_limit=budget)
-    desc = BUILTIN[scene](w, h)
+    desc = scene_description(scene, w, h)
     t0 = time.perf_counter()
     r = render(desc, settings)
     wall = time.perf_counter() - t0
@@ -722,10 +756,11 @@ def write_report(args) -> str:
              "mean(var_ref/(r²+0.01)). " + _flip_note(runs), ""]
     lines += target_lines(g, refs, scenes, budgets) + [""]
     conv = "report_convergence.png"
-    plot_convergence(g, scenes, engines, budgets, os.path.join(RESULTS, conv))
-    lines += ["## Error against wall time", "",
-              f"![relMSE vs time, log-log]({conv})", "",
-              "Medians over seeds with min–max bars; x = measured wall time.", ""]
+    if scenes:   # none when no rendered scene has a reference yet
+        plot_convergence(g, scenes, engines, budgets, os.path.join(RESULTS, conv))
+        lines += ["## Error against wall time", "",
+                  f"![relMSE vs time, log-log]({conv})", "",
+                  "Medians over seeds with min–max bars; x = measured wall time.", ""]
     lines += ["## Per scene", ""]
     for s in scenes:
         ref = refs[s]

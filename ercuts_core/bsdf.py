@@ -47,6 +47,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .arrays import take_rows
+from .bump_shadowing import bump_shadowing
 from .description import MaterialTable
 from .sampling import INV_PI, coordinate_system, luminance, sample_cosine_hemisphere, to_local, to_world
 from .vecmath import dot, normalize
@@ -206,6 +207,11 @@ class Bsdf:
         alpha: (N,) GGX alpha = max(roughness², 1e-3).
         p_spec: (N,) probability of sampling the specular lobe.
         is_diffuse: (N,) bool, True where the lane has no specular lobe.
+        n_smooth: (N, 3) unit smooth normals before a normal map/bump (on ``ng``'s side) and
+        shadowing: (N,) int bump-shadowing model codes (:mod:`ercuts_core.bump_shadowing`),
+            both None when no lane has one: the diffuse value kd/π is multiplied by
+            S(light direction) ≤ 1, the pdf is unchanged. S makes f non-reciprocal: the light
+            side is wi, or wo with ``adjoint=True`` (light subpaths).
     """
 
     ns: F64
@@ -216,12 +222,15 @@ class Bsdf:
     alpha: F64
     p_spec: F64
     is_diffuse: B
+    n_smooth: F64 | None = None
+    shadowing: NDArray | None = None
 
     # -- construction ---------------------------------------------------------------
 
     @classmethod
     def from_params(cls, base_color: ArrayLike, roughness: ArrayLike, metallic: ArrayLike,
-                    specular: ArrayLike, ns: ArrayLike, ng: ArrayLike) -> Bsdf:
+                    specular: ArrayLike, ns: ArrayLike, ng: ArrayLike, n_smooth: ArrayLike | None = None,
+                    shadowing: ArrayLike | None = None) -> Bsdf:
         """Build from per-lane Principled parameters (broadcast to the N lanes of the normals).
 
         Args:
@@ -229,9 +238,13 @@ class Bsdf:
             roughness, metallic: (N,) clipped to [0, 1].
             specular: (N,) "Specular IOR Level" >= 0 (F0_d = 0.08·specular, clipped to 1).
             ns, ng: (N, 3) shading / geometric normals (renormalized; zero rows give f = 0).
+            n_smooth, shadowing: bump shadowing (class docstring), or None.
         """
         ns, ng = _oriented_normals(ns, ng)
         lobes = _lobe_params(base_color, roughness, metallic, specular, ng.shape[0])
+        if n_smooth is not None and shadowing is not None:
+            lobes.update(n_smooth=_oriented_normals(n_smooth, ng)[0],
+                         shadowing=np.asarray(shadowing, np.int8).reshape(-1))
         return cls(ns=ns, ng=ng, **lobes)
 
     @classmethod
@@ -255,7 +268,8 @@ class Bsdf:
     def subset(self, mask_or_idx: ArrayLike) -> Bsdf:
         """The lanes selected by a (N,) bool mask or an integer index array."""
         sel = np.asarray(mask_or_idx)
-        return Bsdf(**{f: take_rows(getattr(self, f), sel) for f in _FIELDS})
+        return Bsdf(**{f: take_rows(getattr(self, f), sel) for f in _FIELDS
+                       if getattr(self, f) is not None})
 
     @cached_property
     def all_diffuse(self) -> bool:
@@ -273,8 +287,15 @@ class Bsdf:
         sign = np.where(dot(wo, self.ng) < 0.0, -1.0, 1.0)[:, None]   # ×(±1) is exact
         return self.ns * sign, self.ng * sign
 
-    def _eval_pdf(self, wo: F64, wi: F64, flipped: tuple[F64, F64] | None = None
-                  ) -> tuple[F64, F64, F64, B]:
+    def _diffuse_weight(self, wo: F64, wi: F64, adjoint: bool) -> F64 | float:
+        """1/π, or 1/π·S (N,) with the bump shadowing S of the light-side direction."""
+        if self.shadowing is None:
+            return INV_PI
+        # S is unchanged when ns and n_smooth flip together: the unflipped pair is used
+        return INV_PI * bump_shadowing(self.shadowing, self.n_smooth, self.ns, wo if adjoint else wi)
+
+    def _eval_pdf(self, wo: F64, wi: F64, flipped: tuple[F64, F64] | None = None,
+                  adjoint: bool = False) -> tuple[F64, F64, F64, B]:
         """Shared core of eval/pdf/sample (``flipped``: this call's ``_flipped_normals(wo)``).
 
         Returns:
@@ -284,9 +305,10 @@ class Bsdf:
         cos_o, cos_i = dot(wo, ns), dot(wi, ns)
         valid = ((cos_o > COS_EPS) & (cos_i > COS_EPS)
                  & (dot(wo, ng) > COS_EPS) & (dot(wi, ng) > COS_EPS))
+        inv_pi = self._diffuse_weight(wo, wi, adjoint)
         if self.all_diffuse:
             # Lambert only: f = kd/π, pdf = cos_i/π on the valid set (see all_diffuse).
-            w = np.where(valid, INV_PI, 0.0)          # kd ≥ 0 finite: kd·0 = +0 exactly
+            w = np.where(valid, inv_pi, 0.0)          # kd ≥ 0 finite: kd·0 = +0 exactly
             return self.kd * w[:, None], np.where(valid, cos_i * INV_PI, 0.0), cos_i, valid
         # Half vector terms; wo + wi is computed the same way for (wo, wi) and (wi, wo)
         h_len = np.sqrt(dot(wo + wi, wo + wi))
@@ -298,35 +320,38 @@ class Bsdf:
         F = schlick_fresnel(cos_d, self.f0, self.f90)
         cc = np.where(valid, 4.0 * cos_o * cos_i, 0.0)
         f_spec = F * _div(D * G2, cc)[:, None]
-        f = np.where(valid[:, None], self.kd * INV_PI + f_spec, 0.0)
+        kd_pi = self.kd * (inv_pi if self.shadowing is None else inv_pi[:, None])
+        f = np.where(valid[:, None], kd_pi + f_spec, 0.0)
         # Mixture pdf of sample(): VNDF reflection pdf G1(wo) D / (4 cos_o) and cos/π
         pdf_spec = _div(D / (1.0 + lam_o), np.where(valid, 4.0 * cos_o, 0.0))
         pdf_diff = np.maximum(cos_i, 0.0) * INV_PI
         pdf = np.where(valid, self.p_spec * pdf_spec + (1.0 - self.p_spec) * pdf_diff, 0.0)
         return f, pdf, cos_i, valid
 
-    def eval(self, wo: ArrayLike, wi: ArrayLike) -> F64:
-        """BSDF value f_r(wo, wi) (no cosine factor), (N, 3) [sr⁻¹]."""
+    def eval(self, wo: ArrayLike, wi: ArrayLike, adjoint: bool = False) -> F64:
+        """BSDF value f_r(wo, wi) (no cosine factor), (N, 3) [sr⁻¹]; ``adjoint``: wo is the
+        light side (class docstring)."""
         with np.errstate(under="ignore"):
-            return self._eval_pdf(_as3(wo), _as3(wi))[0]
+            return self._eval_pdf(_as3(wo), _as3(wi), adjoint=adjoint)[0]
 
     def pdf(self, wo: ArrayLike, wi: ArrayLike) -> F64:
         """Solid-angle pdf (N,) [sr⁻¹] with which :meth:`sample` (given wo) returns wi."""
         with np.errstate(under="ignore"):
             return self._eval_pdf(_as3(wo), _as3(wi))[1]
 
-    def eval_pdf(self, wo: ArrayLike, wi: ArrayLike) -> tuple[F64, F64]:
-        """``(eval(wo, wi), pdf(wo, wi))`` from one evaluation: (N, 3) and (N,) [sr⁻¹]."""
+    def eval_pdf(self, wo: ArrayLike, wi: ArrayLike, adjoint: bool = False) -> tuple[F64, F64]:
+        """``(eval(wo, wi, adjoint), pdf(wo, wi))`` from one evaluation: (N, 3), (N,) [sr⁻¹]."""
         with np.errstate(under="ignore"):
-            f, pdf, _, _ = self._eval_pdf(_as3(wo), _as3(wi))
+            f, pdf, _, _ = self._eval_pdf(_as3(wo), _as3(wi), adjoint=adjoint)
         return f, pdf
 
-    def sample(self, wo: ArrayLike, u: ArrayLike) -> BsdfSample:
+    def sample(self, wo: ArrayLike, u: ArrayLike, adjoint: bool = False) -> BsdfSample:
         """Importance-sample wi given wo.
 
         Args:
             wo: (N, 3) unit outgoing directions (away from the surface).
             u: (N, 3) uniforms; u[:, 0] selects the lobe, u[:, 1:] the direction.
+            adjoint: wo is the light side (light subpaths; class docstring).
         Returns:
             :class:`BsdfSample`; lanes with wo or wi under the (flipped) horizon are invalid.
         """
@@ -346,7 +371,7 @@ class Bsdf:
                 wi_spec = 2.0 * dot(wo_l, m)[:, None] * m - wo_l
                 wi_l = np.where((u[:, 0] < self.p_spec)[:, None], wi_spec, wi_l)
             wi = _normalize(to_world(wi_l, t, b, ns))
-            f, pdf, cos_i, valid = self._eval_pdf(wo, wi, flipped)
+            f, pdf, cos_i, valid = self._eval_pdf(wo, wi, flipped, adjoint)
             valid &= pdf > 0.0
             weight = np.where(valid[:, None], f * _div(np.abs(cos_i), pdf)[:, None], 0.0)
         return BsdfSample(wi=wi, f=f, pdf=np.where(valid, pdf, 0.0), weight=weight,
@@ -361,7 +386,7 @@ class Bsdf:
 
 
 #: The per-lane array fields of :class:`Bsdf` (what ``subset`` selects).
-_FIELDS = ("ns", "ng", "kd", "f0", "f90", "alpha", "p_spec", "is_diffuse")
+_FIELDS = ("ns", "ng", "kd", "f0", "f90", "alpha", "p_spec", "is_diffuse", "n_smooth", "shadowing")
 
 
 def bsdf_max_value(table: MaterialTable, mat_idx: ArrayLike) -> F64:

@@ -421,6 +421,7 @@ def save_npz(desc: SceneDescription, path: str | os.PathLike) -> None:
             if value is not None:
                 data[f"{part}.{f.name}"] = _to_array(value)
     data["textures.names"] = _to_array(desc.textures.names)
+    data["textures.srgb"] = np.array(desc.textures.srgb, bool)
     for i, image in enumerate(desc.textures.images):
         data[f"textures.image.{i}"] = image
     with atomic_path(path, ".npz") as tmp:  # the suffix: numpy appends .npz to other names
@@ -442,7 +443,9 @@ def load_npz(path: str | os.PathLike) -> SceneDescription:
                 parts[part] = cls(**kwargs)
         names = z["object_names"]
         tex_names = tuple(str(s) for s in z["textures.names"].reshape(-1)) if "textures.names" in keys else ()
-        textures = TextureTable(tex_names, tuple(z[f"textures.image.{i}"] for i in range(len(tex_names))))
+        srgb = tuple(z["textures.srgb"].tolist()) if "textures.srgb" in keys else ()
+        images = tuple(z[f"textures.image.{i}"] for i in range(len(tex_names)))
+        textures = TextureTable(tex_names, images, srgb)
         return SceneDescription(
             mesh=parts["mesh"],
             materials=parts["materials"],

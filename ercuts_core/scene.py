@@ -74,6 +74,8 @@ class BuiltScene:
         # Shading programs (issue 14): inactive — and never consulted — without programs
         self.shading = SceneShading(desc, self.tri_p, self.tri_mat, self.tri_ng)
         self.textured = self.shading.active
+        #: ns may differ from ng somewhere: interpolated normals, or a program's normal output
+        self.has_shading_normals = self.has_normals or bool(self.shading.row_normal.any())
         tri_emission = self.shading.triangle_emission(desc.materials.emission) \
             if self.textured else None
         self.lights = LightSet(desc, self.tri_p, self.tri_ng, self.tri_area, tri_emission,
@@ -100,29 +102,47 @@ class BuiltScene:
         b = np.stack([1.0 - hit.u - hit.v, hit.u, hit.v], axis=1)                        # (N, 3)
         p = np.einsum("nk,nkj->nj", b, take_rows(self.tri_p, prim))
         ng = take_rows(self.tri_ng, prim)
-        ns = ng
-        if self.has_normals:
-            interp = np.einsum("nk,nkj->nj", b, take_rows(self.tri_vn, prim))
-            ln = np.linalg.norm(interp, axis=1)
-            use = take_rows(self.tri_smooth, prim) & (ln > 1e-8)
-            interp = interp / np.maximum(ln, 1e-300)[:, None]
-            # Keep the shading normal on the geometric normal's side.
-            flip = dot(interp, ng) < 0
-            interp[flip] *= -1.0
-            ns = np.where(use[:, None], interp, ng)
+        ns = self._smooth_normals(prim, b, ng)
         mat = take_rows(self.tri_mat, prim)
         if self.textured:
             ns = self.shading.shading_normals(valid, prim, b, mat, ng, ns)
             mat = self.shading.keys(valid, prim, mat)
         return Surface(valid, p, ng, ns, hit.prim, mat, hit.t)
 
+    def _smooth_normals(self, prim: NDArray, b: NDArray, ng: NDArray) -> NDArray:
+        """(N, 3) interpolated vertex normals at barycentrics b (N, 3) of triangles prim, on
+        the side of ``ng``; ng itself on flat faces and meshes without normals."""
+        if not self.has_normals:
+            return ng
+        interp = np.einsum("nk,nkj->nj", b, take_rows(self.tri_vn, prim))
+        ln = np.linalg.norm(interp, axis=1)
+        use = take_rows(self.tri_smooth, prim) & (ln > 1e-8)
+        interp = interp / np.maximum(ln, 1e-300)[:, None]
+        # Keep the shading normal on the geometric normal's side.
+        flip = dot(interp, ng) < 0
+        interp[flip] *= -1.0
+        return np.where(use[:, None], interp, ng)
+
     def bsdf(self, mat: NDArray, ns: NDArray, ng: NDArray, p: NDArray) -> Bsdf:
         """The BSDF at N vertices from their shading keys ``mat`` (see :class:`Surface`),
-        positions p and normals (N, 3). Without programs: ``Bsdf.from_table`` exactly."""
+        positions p and normals (N, 3). Without programs: ``Bsdf.from_table`` exactly.
+
+        Keys of materials with a normal map and a bump-shadowing model
+        (:mod:`ercuts_core.bump_shadowing`) carry their triangle: the smooth normal before
+        the map is interpolated again at p for the diffuse shadowing term."""
         if not self.textured:
             return Bsdf.from_table(self.materials, mat, ns, ng)
         prm = self.shading.bsdf_params(mat, p, ns, ng)
-        return Bsdf.from_params(prm["base_color"], prm["roughness"], prm["metallic"], prm["specular"], ns, ng)
+        model = self.shading.shadowing(mat)
+        n_smooth = None
+        if model is not None:
+            n_smooth = np.array(ns, np.float64, copy=True).reshape(-1, 3)
+            lanes = np.flatnonzero(model)
+            prim = np.asarray(mat, np.int64)[lanes] - self.shading.n_rows
+            b = self.shading.mesh.barycentrics(prim, np.asarray(p, np.float64).reshape(-1, 3)[lanes])
+            n_smooth[lanes] = self._smooth_normals(prim, b, self.tri_ng[prim])
+        return Bsdf.from_params(prm["base_color"], prm["roughness"], prm["metallic"], prm["specular"],
+                                ns, ng, n_smooth, model)
 
     def bsdf_max_value(self, mat: NDArray, p: NDArray) -> NDArray:
         """(N, 3) :func:`ercuts_core.bsdf.bsdf_max_value` at shading keys ``mat`` and positions p."""

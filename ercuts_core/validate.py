@@ -238,7 +238,7 @@ def _clean_textures(textures: TextureTable, issues: list[Issue]) -> TextureTable
     names = list(textures.names)[:len(textures.images)]
     names += [f"#{i}" for i in range(len(names), len(textures.images))]
     return TextureTable(tuple(names), tuple(_clean_image(n, im, issues)
-                                            for n, im in zip(names, textures.images)))
+                                            for n, im in zip(names, textures.images)), textures.srgb)
 
 
 def _finite_rows(desc, arrays, object_ids, kind, issues) -> np.ndarray:

@@ -22,7 +22,7 @@ def _textured(d, uvs=True, tangents=True, programs=None, images=None):
     mats = MaterialTable(mats.names, mats.base_color, mats.roughness, mats.metallic, mats.specular,
                          mats.emission, progs)
     images = images if images is not None else (rng.random((4, 3, 4)), np.ones((2, 5, 4)))
-    tex = TextureTable(tuple(f"img{i}" for i in range(len(images))), images)
+    tex = TextureTable(tuple(f"img{i}" for i in range(len(images))), images, (True,))
     return d.replace(mesh=mesh, materials=mats, textures=tex)
 
 
@@ -45,6 +45,8 @@ def test_npz_round_trip_with_uvs_tangents_programs_textures(tmp_path):
     np.testing.assert_array_equal(d.mesh.tangents, e.mesh.tangents)
     assert e.materials.programs == d.materials.programs
     assert e.textures.names == d.textures.names
+    assert e.textures.srgb == d.textures.srgb == (True, False)
+    assert sanitize(e).desc.textures.srgb == (True, False)
     for a, b in zip(d.textures.images, e.textures.images):
         assert b.dtype == np.float32
         np.testing.assert_array_equal(a, b)

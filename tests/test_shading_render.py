@@ -199,6 +199,24 @@ def test_alpha_cutout_shows_the_sky_through_the_plane(alpha_value):
                                    err_msg=integrator)
 
 
+def test_two_stacked_alpha_planes_transmit_the_product():
+    """Black planes of alpha 0.25 above alpha 0.4 under a uniform sky, seen from above: the
+    sky shows through with probability (1 − 0.25)(1 − 0.4). The second crossing of a ray used
+    to raise an overflow warning (the pass-through hash's wrapping multiply)."""
+    d = textured_plane()
+    m = d.mesh
+    low = m.positions + [0.0, -0.3, 0.0]
+    pos = np.vstack([m.positions, low])
+    tris = np.vstack([m.triangles, m.triangles + 4])
+    progs = tuple(json.dumps({"version": 1, "nodes": [], "outputs": {"alpha": a}}) for a in (0.25, 0.4))
+    two = MaterialTable(("Top", "Low"), [[0.0] * 3] * 2, [1, 1], [0, 0], [0, 0], np.zeros((2, 3)), progs)
+    d = d.replace(mesh=MeshTable(pos, tris, [0, 0, 1, 1], [0, 0, 1, 1], uvs=np.concatenate([m.uvs, m.uvs])),
+                  materials=two, object_names=("Top", "Low"))
+    for integrator in ("PATH", "BDPT"):
+        img = render(d, RenderSettings(integrator=integrator, samples=32, seed=2, max_depth=2)).image
+        np.testing.assert_allclose(img[..., :3].mean(), 0.75 * 0.6 * 1.5, rtol=0.03, err_msg=integrator)
+
+
 def test_alpha_cutout_casts_a_partial_shadow_and_integrators_agree():
     """A cut-out plane (half its texels transparent) above a grey floor under the sky, seen
     from the side: PATH and BDPT agree (shadow rays pass the cut-outs too)."""

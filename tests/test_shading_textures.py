@@ -73,3 +73,34 @@ def test_vectorized_shapes():
     out = lookup(IMG, np.zeros((0, 2)))
     assert out.shape == (0, 4)
     assert lookup(IMG, np.zeros((7, 2))).shape == (7, 4)
+
+
+def test_srgb_encoded_rows_interpolate_encoded_then_decode():
+    """Cycles' compress_as_srgb: a white and a blue texel (8-bit sRGB), Linear lookup at the
+    midpoint reads EOTF((a + b)/2), not (EOTF(a) + EOTF(b))/2; Closest reads EOTF(texel)."""
+    import json
+
+    from ercuts_core.shading.geometry import MeshShading
+    from ercuts_core.shading.program import compile_program
+    from ercuts_core.shading.textures import TextureTable, srgb_to_linear
+
+    enc = np.array([[[0.85, 0.8, 0.7, 1.0], [0.25, 0.35, 0.6, 1.0]]], np.float32)    # (1, 2, 4)
+    eotf = lambda c: np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)  # noqa: E731
+    table = TextureTable(("t",), (enc,), (True,))
+    assert table.srgb == (True,) and TextureTable(("t",), (enc,)).srgb == (False,)
+    np.testing.assert_allclose(table.linear(0)[..., :3], eotf(enc[..., :3].astype(np.float64)), rtol=1e-6)
+    np.testing.assert_allclose(srgb_to_linear(np.array([-0.1, 0.0, 0.04, 1.0])), [0, 0, 0.04 / 12.92, 1])
+    tri = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], float)
+    mesh = MeshShading(tri, np.array([[[0, 0], [1, 0], [0, 1]]], np.float32), None, np.zeros(1, int), table)
+    b = np.array([[0.5, 0.5, 0.0], [0.75, 0.2, 0.05]])          # u = 0.5: midway between centres
+    ctx = mesh.context(np.zeros(2, int), b, np.tile([0, 0, 1.0], (2, 1)), np.tile([0, 0, 1.0], (2, 1)))
+    got = {}
+    for interp, want in (("Linear", eotf((enc[0, 0, :3] + enc[0, 1, :3]) / 2.0)),
+                         ("Closest", eotf(enc[0, 1, :3].astype(np.float64)))):
+        node = {"type": "TEX_IMAGE", "params": {"texture": 0, "interpolation": interp, "extension": "EXTEND"}}
+        prog = {"version": 1, "nodes": [node],
+                "outputs": {"base_color": {"node": 0, "socket": "Color"}}}
+        got[interp] = compile_program(json.dumps(prog), "M", 1)[0].evaluate(ctx, ["base_color"])["base_color"]
+        np.testing.assert_allclose(got[interp][0], want, rtol=1e-6, err_msg=interp)
+    linear_mid = (eotf(enc[0, 0, :3]) + eotf(enc[0, 1, :3])) / 2.0
+    assert got["Linear"][0, 0] < 0.75 * linear_mid[0]           # red: 29 % darker than linear-space

@@ -31,6 +31,10 @@ second row, the image's *associated variant* (``index_of(..., associated=True)``
 EOTF(c·α) for byte sRGB, (linear c)·α otherwise, alpha unchanged. It exists only for images
 with some alpha below 1 read that way.
 
+Texture rows of byte sRGB images keep the 8-bit *encoded* values (:func:`read_texture`,
+``TextureTable.srgb``): Cycles interpolates them encoded and decodes after the lookup
+(``compress_as_srgb``), so Linear interpolation between different texels must too.
+
 A missing or unloadable image (no file, zero size, no pixels) becomes a 1×1 magenta texture
 (Cycles' missing-texture colour, RGBA (1, 0, 1, 1)) with one warning naming image and
 material; NaN/Inf pixels are replaced by 0 with a warning.
@@ -82,19 +86,32 @@ def read_image(image) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
     ``image`` and Cycles' associated-colour variant (None when it equals the straight one:
     no alpha below 1, data, channel-packed or NONE alpha), or (None, None, notes) if the
     image cannot be loaded."""
+    straight, associated, notes, _ = _read(image, decode=True)
+    return straight, associated, notes
+
+
+def read_texture(image) -> tuple[np.ndarray | None, np.ndarray | None, list[str], bool]:
+    """As :func:`read_image` plus a flag, for texture rows: byte sRGB images come back
+    *encoded* (flag True): straight = the 8-bit values, associated = the 8-bit premultiplied
+    codes round(c·α·255)/255 (Cycles premultiplies the encoded bytes); the core decodes
+    after interpolating (``TextureTable.srgb``)."""
+    return _read(image, decode=False)
+
+
+def _read(image, decode: bool):
     notes: list[str] = []
     try:
         w, h = (int(x) for x in image.size)
         if w <= 0 or h <= 0:
-            return None, None, notes
+            return None, None, notes, False
         n = len(image.pixels)
         if n == 0 or n % (w * h):
-            return None, None, notes
+            return None, None, notes, False
         channels = n // (w * h)
         buf = np.empty(n, np.float32)
         image.pixels.foreach_get(buf)
     except (RuntimeError, ReferenceError, ValueError, OSError):
-        return None, None, notes
+        return None, None, notes, False
     px = buf.reshape(h, w, channels)
     if channels == 4:
         rgba = px  # a fresh buffer: modified in place
@@ -127,15 +144,17 @@ def read_image(image) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
         associated = rgba.copy()
         associated[..., :3] *= rgba[..., 3:4]
         if srgb:  # Cycles premultiplies the 8-bit values, then linearises
-            associated[..., :3] = srgb_bytes_to_linear(associated[..., :3])
-    if srgb:
+            associated[..., :3] = srgb_bytes_to_linear(associated[..., :3]) if decode else \
+                np.clip(np.rint(associated[..., :3] * np.float32(255.0)), 0, 255) / np.float32(255.0)
+    if srgb and decode:
         rgba[..., :3] = srgb_bytes_to_linear(rgba[..., :3])
-    elif not is_float and not (data or _is_linear_space(space)):
+    elif not srgb and not is_float and not (data or _is_linear_space(space)):
         notes.append(f"colour space '{space}' not converted (read as linear)")
     if associated is not None and not srgb:
         associated[..., :3] = rgba[..., :3] * rgba[..., 3:4]
     return (np.ascontiguousarray(rgba, np.float32),
-            None if associated is None else np.ascontiguousarray(associated, np.float32), notes)
+            None if associated is None else np.ascontiguousarray(associated, np.float32), notes,
+            srgb and not decode)
 
 
 def cache_key(image):
@@ -182,6 +201,7 @@ class TextureCollector:
         self.reads = 0
         self.names: list[str] = []
         self.images: list[np.ndarray] = []
+        self.srgb: list[bool] = []
         self.infos: list[TextureInfo] = []
         self.warnings: list[str] = []
         self._index: dict = {}
@@ -196,32 +216,36 @@ class TextureCollector:
             ckey = cache_key(image) if self.cache is not None else None
             cached = self.cache.get(ckey) if ckey is not None else None
             if cached is None:
-                cached = read_image(image)
+                cached = read_texture(image)
                 self.reads += 1
             if ckey is not None:
                 self.cache_out[ckey] = cached
-            straight, assoc, notes = cached
+            straight, assoc, notes, srgb = cached
             if straight is None:
                 self.warnings.append(f"Image '{image.name}' (material '{material_name}') is missing "
                                      f"or cannot be loaded: rendered magenta")
-                straight = MAGENTA.copy()
+                straight, srgb = MAGENTA.copy(), False
             for note in notes:
                 self.warnings.append(f"Image '{image.name}' (material '{material_name}'): {note}")
-            rows = self._index[key] = [self._add(image.name, straight), None]
-            self._pending[key] = assoc
-        if associated and self._pending.get(key) is not None:
+            rows = self._index[key] = [self._add(image.name, straight, srgb), None]
+            self._pending[key] = (assoc, srgb)
+        assoc, srgb = self._pending.get(key, (None, False))
+        if associated and assoc is not None:
             if rows[1] is None:
-                rows[1] = self._add(image.name + " (associated alpha)", self._pending[key])
+                rows[1] = self._add(image.name + " (associated alpha)", assoc, srgb)
             return rows[1], self.infos[rows[1]]
         return rows[0], self.infos[rows[0]]
 
-    def _add(self, name: str, pixels: np.ndarray) -> int:
+    def _add(self, name: str, pixels: np.ndarray, srgb: bool = False) -> int:
         flat = pixels.reshape(-1, 4)
         sample = flat[::max(1, len(flat) // 65536)]  # an estimate: ≤ 64 Ki texels suffice
+        if srgb:   # the estimate is of linear colour
+            sample = np.concatenate([srgb_bytes_to_linear(sample[:, :3]), sample[:, 3:]], axis=1)
         mean = sample.mean(axis=0, dtype=np.float64)
         info = TextureInfo(mean_color=tuple(float(x) for x in mean[:3]), mean_alpha=float(mean[3]))
         self.names.append(name)
         self.images.append(pixels)
+        self.srgb.append(bool(srgb))
         self.infos.append(info)
         return len(self.names) - 1
 
@@ -235,4 +259,4 @@ class TextureCollector:
             from ercuts_core.shading.textures import TextureTable
         except ImportError:
             return None
-        return TextureTable(names=tuple(self.names), images=tuple(self.images))
+        return TextureTable(names=tuple(self.names), images=tuple(self.images), srgb=tuple(self.srgb))

@@ -913,8 +913,10 @@ def compile_material(mat, textures=None, space: ObjectSpace | None = None) -> Co
     if needs_program:
         outputs = {n: _jsonable(getattr(closure, n)) for n in names}
         outputs["normal"] = _jsonable(closure.normal)
-        program = json.dumps({"version": VERSION, "nodes": comp.nodes, "outputs": outputs},
-                             separators=(",", ":"))
+        data = {"version": VERSION, "nodes": comp.nodes, "outputs": outputs}
+        if closure.normal is not None:
+            data["bump_shadowing"] = compat.BUMP_SHADOWING
+        program = json.dumps(data, separators=(",", ":"))
     else:
         comp.uses_uvs = comp.uses_tangents = False
         comp.uv_maps = set()

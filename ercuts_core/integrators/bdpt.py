@@ -87,12 +87,14 @@ _RATIO_MAX = 1e30
 _PRODUCT_MAX = 1e300
 
 
-def _eval_pdf(bsdf: Bsdf, wo: NDArray, wi: NDArray) -> tuple[NDArray, NDArray]:
+def _eval_pdf(bsdf: Bsdf, wo: NDArray, wi: NDArray, adjoint: bool = False) -> tuple[NDArray, NDArray]:
     """(f(wo, wi) (N, 3), pdf(wo → wi) (N,)) in one BSDF evaluation.
 
     ``Bsdf.eval`` and ``Bsdf.pdf`` share one core: :meth:`Bsdf.eval_pdf` runs it once.
+    ``adjoint``: wo points to the light side (light subpaths; the bump shadowing term of
+    :class:`~ercuts_core.bsdf.Bsdf` is the only non-reciprocal factor).
     """
-    return bsdf.eval_pdf(wo, wi)
+    return bsdf.eval_pdf(wo, wi, adjoint)
 
 
 def _adjoint_correction(ns: NDArray, ng: NDArray, wo: NDArray, wi: NDArray) -> NDArray:
@@ -246,8 +248,8 @@ class BDPTIntegrator(Integrator):
         self.max_rows = int(max_rows)
         self.strategy_images: dict[tuple[int, int], NDArray] | None = {} if debug_strategies else None
         self.has_env = lights.env_light >= 0
-        # Without shading normals the adjoint correction is exactly 1.
-        self.shading_normals = scene.has_normals
+        # Without shading normals (vertex normals, normal maps, bump) the adjoint correction is 1.
+        self.shading_normals = scene.has_shading_normals
         # Emitters that camera rays can hit (only they need a last camera vertex: s = 0).
         hittable = self.has_env or len(lights.emissive_tris) > 0
         depth = settings.max_depth
@@ -438,7 +440,7 @@ class BDPTIntegrator(Integrator):
             if last:
                 break
             # Sample the BSDF for the next vertex
-            bs = bsdf.sample(wo, rng.random((len(lanes), 3)))
+            bs = bsdf.sample(wo, rng.random((len(lanes), 3)), adjoint=importance)
             beta = beta * bs.weight
             if importance and self.shading_normals:
                 beta = beta * _adjoint_correction(ns, ng, wo, bs.wi)[:, None]
@@ -657,7 +659,7 @@ class BDPTIntegrator(Integrator):
         w = v / np.sqrt(d2)[:, None]                              # light vertex → camera vertex
         bq = self.scene.bsdf(lig.at("mat", kq, lane), qns, qng, qp)
         bp = self.scene.bsdf(cam.at("mat", kp, lane), pns, png, pp)
-        fq, pdf_q = _eval_pdf(bq, qwo, w)                 # pdf_q: qs → pt
+        fq, pdf_q = _eval_pdf(bq, qwo, w, adjoint=True)   # pdf_q: qs → pt
         fp, pdf_p = _eval_pdf(bp, pwo, -w)                # pdf_p: pt → qs
         if self.shading_normals:
             fq = fq * _adjoint_correction(qns, qng, qwo, w)[:, None]
@@ -693,8 +695,8 @@ class BDPTIntegrator(Integrator):
         wi, factor = conn.wi[idx], conn.factor[idx]
         raster, dist = conn.raster[idx], conn.dist[idx]
         bsdf = self.scene.bsdf(lig.at("mat", k, lane), ns, ng, p)
-        # One evaluation toward the light vertex's predecessor gives f (the BSDF is
-        # reciprocal, f(wi, wo) = f(wo, wi)) and the reverse density for MIS.
+        # One evaluation toward the light vertex's predecessor gives f (wi: the camera
+        # side, wo: the light side, as on camera paths) and the reverse density for MIS.
         f, pdf_rev = _eval_pdf(bsdf, wi, wo)
         if self.shading_normals:
             f = f * _adjoint_correction(ns, ng, wo, wi)[:, None]

@@ -21,7 +21,8 @@ Program format (version 1), a JSON string per material row (``MaterialTable.prog
                 "params": {...}}, ...],          # topological order: refs point backwards
      "outputs": {"base_color": <value>, "roughness": <value>, "metallic": <value>,
                  "specular": <value>, "emission": <value>,   # radiance = colour × strength
-                 "alpha": <value>, "normal": <value> | null}} # normal: world-space vector
+                 "alpha": <value>, "normal": <value> | null}, # normal: world-space vector
+     "bump_shadowing": "NONE" | "CHIANG2019" | "ESTEVEZ2019"}   # optional, default NONE
 
     <value> := number | [x, y, z] | {"node": <index>, "socket": <output socket name>}
 
@@ -94,6 +95,9 @@ Core semantics the exporter relies on (issue 14, core side; tests/test_shading_*
   world-space bounding box (``MeshTable.object_ids``): exact for objects with an identity
   (Object, Normal) or rotation-free (Generated) transform.
 * LIGHT_PATH: any output socket name; Is Camera Ray = 1, every other output 0.
+* ``bump_shadowing``: with a ``normal`` output, the diffuse lobe's value is multiplied by
+  Cycles' bump shadowing term of that model (:mod:`ercuts_core.bump_shadowing`; the exporter
+  writes the one of the Blender version); NONE keeps the exact Lambert cosine.
 * ``alpha`` output: stochastic transparency for every ray (camera, bounce, shadow).
 * ``emission`` output: evaluated per point (radiance = colour × strength, two-sided);
   lights are chosen by each triangle's mean emission over 16 stratified points, so

@@ -24,8 +24,8 @@ def _hash_uniform(o: NDArray, d: NDArray, k: int) -> NDArray:
     """(N,) uniforms in [0, 1) from the float bits of ray origins/directions and crossing k
     (a 64-bit multiply–xorshift mix; splitmix64 constants)."""
     bits = np.ascontiguousarray(np.concatenate([o, d], axis=1), np.float64).view(np.uint64)
-    h = np.full(len(o), np.uint64(0x9E3779B97F4A7C15) * np.uint64(k + 1), np.uint64)
-    with np.errstate(over="ignore"):
+    with np.errstate(over="ignore"):           # the multiplies wrap modulo 2⁶⁴ on purpose
+        h = np.full(len(o), np.uint64(0x9E3779B97F4A7C15) * np.uint64(k + 1), np.uint64)
         for j in range(6):
             h ^= bits[:, j]
             h *= np.uint64(0xBF58476D1CE4E5B9)

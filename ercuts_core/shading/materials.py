@@ -62,6 +62,8 @@ class SceneShading:
                                   for p in self.programs], bool)
         self.row_emission = np.array([p is not None and p.has("emission") for p in self.programs], bool)
         self.row_alpha = np.array([p is not None and p.has("alpha") for p in self.programs], bool)
+        self.row_shadowing = np.array([p.bump_shadowing if p is not None and p.has("normal") else 0
+                                       for p in self.programs], np.int8)
         self._init_families()
         if self.active:
             m = desc.mesh
@@ -91,9 +93,18 @@ class SceneShading:
 
     def keys(self, valid: NDArray, prim: NDArray, mat: NDArray) -> NDArray:
         """(N,) shading keys of hits (module docstring): M + prim where the row's program
-        changes the BSDF, else the material row."""
-        textured = valid & self.row_bsdf[mat]
+        changes the BSDF or has a bump-shadowing model (which needs the triangle), else
+        the material row."""
+        textured = valid & (self.row_bsdf[mat] | (self.row_shadowing[mat] > 0))
         return np.where(textured, self.n_rows + prim, mat)
+
+    def shadowing(self, key: NDArray) -> NDArray | None:
+        """(N,) bump-shadowing model codes of shading keys (:mod:`ercuts_core.bump_shadowing`;
+        only keys ≥ M can have one), or None when the scene has none."""
+        if not self.row_shadowing.any():
+            return None
+        key = np.asarray(key, np.int64).reshape(-1)
+        return np.where(key >= self.n_rows, self.row_shadowing[self.rows(key)], 0).astype(np.int8)
 
     def rows(self, key: NDArray) -> NDArray:
         """(N,) material rows of shading keys."""

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .color import hsl_to_rgb, hsv_to_rgb, rgb_to_gray, rgb_to_hsl, rgb_to_hsv
-from .textures import lookup
+from .textures import lookup, srgb_to_linear
 
 F, C, V = "f", "c", "v"
 
@@ -129,11 +129,12 @@ def light_path(inp, params, ctx):
 
 
 def tex_image(inp, params, ctx):
-    """TEX_IMAGE: :func:`ercuts_core.shading.textures.lookup` at Vector.xy (default: UV).
-    An out-of-range texture row reads Cycles' magenta (the validator warns)."""
+    """TEX_IMAGE: :func:`ercuts_core.shading.textures.lookup` at Vector.xy (default: UV),
+    decoded after the interpolation for sRGB-encoded rows (``TextureTable.srgb``). An
+    out-of-range texture row reads Cycles' magenta (the validator warns)."""
     uv = inp.vec("Vector")[:, :2] if inp.has("Vector") else ctx.uv
     tex = params.get("texture", -1)
-    images = ctx.textures.images
+    images, srgb = ctx.textures.images, ctx.textures.srgb
     # A family of materials (program.merge) gives one texture row per material
     idx = tex[ctx.lane_row] if isinstance(tex, np.ndarray) else np.full(ctx.n, int(tex))
     rgba = np.tile([1.0, 0.0, 1.0, 1.0], (ctx.n, 1))
@@ -142,6 +143,8 @@ def tex_image(inp, params, ctx):
             sel = idx == row
             rgba[sel] = lookup(images[row], uv[sel], params.get("interpolation", "Linear"),
                                params.get("extension", "REPEAT"))
+            if srgb[row]:
+                rgba[sel, :3] = srgb_to_linear(rgba[sel, :3])
     return {"Color": (rgba[:, :3], C), "Alpha": (rgba[:, 3], F)}
 
 

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..bump_shadowing import MODELS
 from .nodes import BLEND_MODES, MATH_OPS, NODES, VECT_MATH_OPS, C, F, V, Inputs, as_float, as_vec
 
 #: Program outputs and their kinds (f: float, c: colour, v: vector).
@@ -142,7 +143,11 @@ def _parse(data, n_textures: int, notes: list[str]) -> "Program":
             continue
         if raw is not None:
             outputs[name] = _parse_value(raw, len(nodes), nodes, f"output {name!r}")
-    return Program(tuple(nodes), outputs)
+    shadowing = data.get("bump_shadowing", "NONE")
+    if shadowing not in MODELS:
+        notes.append(f"bump_shadowing {shadowing!r} is not a model ({', '.join(MODELS)}): using NONE")
+        shadowing = "NONE"
+    return Program(tuple(nodes), outputs, MODELS[shadowing])
 
 
 def compile_program(text: str, material: str, n_textures: int) -> tuple["Program | None", list[str]]:
@@ -169,10 +174,12 @@ def compile_program(text: str, material: str, n_textures: int) -> tuple["Program
 
 @dataclass(frozen=True)
 class Program:
-    """A validated program: nodes in topological order and the output values."""
+    """A validated program: nodes in topological order, the output values and the
+    bump-shadowing model code of its normal output (:mod:`ercuts_core.bump_shadowing`)."""
 
     nodes: tuple[Node, ...]
     outputs: dict
+    bump_shadowing: int = 0
 
     def closure(self, values) -> list[int]:
         """Sorted indices of the nodes that ``values`` (Refs/Consts) depend on."""
@@ -278,7 +285,7 @@ def signature(program: Program) -> str:
         params = {k: v for k, v in node.params.items() if not (node.type == "TEX_IMAGE" and k == "texture")}
         nodes.append([node.type, sorted((k, _value_key(v)) for k, v in node.inputs.items()), params])
     outputs = sorted((k, _value_key(v)) for k, v in program.outputs.items())
-    return json.dumps([nodes, outputs], sort_keys=True, default=str)
+    return json.dumps([nodes, outputs, program.bump_shadowing], sort_keys=True, default=str)
 
 
 def _merge_value(values: list):
@@ -304,4 +311,4 @@ def merge(programs: list[Program]) -> Program:
             params["texture"] = int(rows[0]) if (rows == rows[0]).all() else rows
         nodes.append(replace(node, inputs=inputs, params=params))
     outputs = {k: _merge_value([p.outputs[k] for p in programs]) for k in base.outputs}
-    return Program(tuple(nodes), outputs)
+    return Program(tuple(nodes), outputs, base.bump_shadowing)

@@ -5,6 +5,11 @@ Conventions (Blender / Cycles, ``intern/cycles/kernel/device/cpu/image.h``):
 * An image is (H, W, 4) float32 linear RGBA with *straight* alpha; row 0 is the image's
   bottom (Blender's pixel order), so texel (i, j) covers u ∈ [j/W, (j+1)/W],
   v ∈ [i/H, (i+1)/H] and its centre is at ((j + 0.5)/W, (i + 0.5)/H).
+* An image flagged ``srgb`` holds sRGB-*encoded* RGB instead (alpha linear): lookups
+  interpolate the encoded values and decode after (:func:`srgb_to_linear`), as Cycles does
+  for 8-bit sRGB images (``compress_as_srgb``, kernel/svm/image.h); Closest lookups are the
+  same either way, Linear ones differ where neighbouring texels differ (between a white and
+  a blue texel the midpoint is 29 % darker than interpolating linear values).
 * ``Closest``: the texel containing (u, v): j = floor(u·W).
 * ``Linear``: bilinear between the four texels whose centres surround (u, v):
   x = u·W − 0.5, j0 = floor(x), weight of j0 + 1 is x − j0 (Cycles' ``frac``).
@@ -45,23 +50,47 @@ class TextureTable:
         names: image names, for messages.
         images: (H, W, 4) float32 C-contiguous linear straight-alpha RGBA per image,
             row 0 at the bottom. ``MaterialTable.programs`` refer to them by row.
+        srgb: per image, True where RGB is sRGB-encoded (module docstring); default
+            (``()``, or shorter than ``images``): False.
     """
 
     names: tuple[str, ...] = ()
     images: tuple[np.ndarray, ...] = field(default_factory=tuple)
+    srgb: tuple[bool, ...] = ()
 
     def __post_init__(self):
         object.__setattr__(self, "names", tuple(str(n) for n in self.names))
         object.__setattr__(self, "images", tuple(np.ascontiguousarray(np.asarray(im, np.float32))
                                                  for im in self.images))
+        flags = tuple(bool(f) for f in self.srgb)[:len(self.images)]
+        object.__setattr__(self, "srgb", flags + (False,) * (len(self.images) - len(flags)))
 
     def __len__(self) -> int:
         return len(self.images)
+
+    def linear(self, row: int) -> F32:
+        """(H, W, 4) float32 linear RGBA of image ``row`` (decoded if it is sRGB-encoded)."""
+        image = self.images[row]
+        if not self.srgb[row]:
+            return image
+        out = image.copy()
+        out[..., :3] = srgb_to_linear(image[..., :3])
+        return out
 
     @property
     def nbytes(self) -> int:
         """Memory held by the images [bytes] (for the memory plan)."""
         return int(sum(im.nbytes for im in self.images))
+
+
+def srgb_to_linear(c: NDArray) -> NDArray:
+    """The piecewise sRGB EOTF (IEC 61966-2-1) as Cycles' ``color_srgb_to_linear``
+    (util/color.h): c/12.92 below 0.04045 (0 for c < 0), ((c + 0.055)/1.055)^2.4 above;
+    float64 (float32 in: float32 out)."""
+    c = np.asarray(c)
+    lo = np.where(c < 0.0, 0.0, c / 12.92)
+    hi = ((np.maximum(c, 0.04045) + 0.055) / 1.055) ** 2.4
+    return np.where(c < 0.04045, lo, hi).astype(np.result_type(c.dtype, np.float32))
 
 
 # ---------------------------------------------------------------------------------------

@@ -202,6 +202,18 @@ def _block_z(ercuts, cycles, block=8):
     return (me - mc) / np.sqrt(ve + vc + (0.01 * mc) ** 2 + 1e-12)
 
 
+def assert_seed_pairs_agree(runs, rtol, tag):
+    """``runs``: [(ercuts, cycles)] of two seeds. Image means within ``rtol`` and 8×8-block
+    z-scores (:func:`_block_z`) within the noise: mean z² < 1.6 and max |z| < 4.5."""
+    e_pair, c_pair = [r[0] for r in runs], [r[1] for r in runs]
+    assert_means_agree((e_pair[0] + e_pair[1]) / 2, (c_pair[0] + c_pair[1]) / 2, rtol=rtol)
+    zb = _block_z(e_pair, c_pair)
+    chi2 = float(np.mean(zb ** 2))
+    print(f"{tag}: 8×8 blocks mean z² {chi2:.2f}, max |z| {np.abs(zb).max():.2f}")
+    assert chi2 < 1.6, f"8×8 blocks: mean z² = {chi2:.2f}, a systematic difference beyond the noise"
+    assert np.abs(zb).max() < 4.5, f"8×8 block off by {np.abs(zb).max():.1f}σ"
+
+
 def _pixel_z(ercuts, cycles):
     """Per-pixel z-scores, the seed-difference variance smoothed over 5×5 pixels."""
     def mean_var(pair):

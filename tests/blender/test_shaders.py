@@ -119,11 +119,15 @@ def test_image_texture_program_and_srgb_pixels():
     got = textures.images[0]
     want = _byte_pixels()
     assert got.shape == (2, 4, 4) and got.dtype == np.float32
-    # exact piecewise sRGB EOTF, written out here independently of the add-on
+    # the row keeps the 8-bit encoded values (the core interpolates, then decodes: Cycles'
+    # compress_as_srgb); decoded, the exact piecewise sRGB EOTF, written out here
+    # independently of the add-on and the core
+    assert textures.srgb == [True] and np.allclose(got, want, atol=1e-7)
     c = want[..., :3].astype(np.float64)
     lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-    assert np.allclose(got[..., :3], lin, rtol=1e-6, atol=1e-7)
-    assert np.all(got[..., 3] == 1.0)
+    decoded = textures.table().linear(0)
+    assert np.allclose(decoded[..., :3], lin, rtol=1e-6, atol=1e-7)
+    assert np.all(decoded[..., 3] == 1.0)
     assert np.allclose(srgb_to_linear(np.float32([0.04045, 0.5, 1.0])), [0.04045 / 12.92, 0.21404114, 1.0])
     # row constants: the image mean stands in for the textured base colour
     assert np.allclose(compiled.constants["base_color"], lin.reshape(-1, 3).mean(axis=0), atol=1e-6)
@@ -187,9 +191,12 @@ def test_byte_srgb_alpha_associates_before_linearising():
     compiled, program, textures = _compile(mat)
     c = 204 / 255
     eotf = lambda x: ((x + 0.055) / 1.055) ** 2.4  # noqa: E731
-    assert np.allclose(textures.images[0][0, 0, :3], eotf(c), rtol=1e-6)          # straight
+    table = textures.table()
+    assert textures.srgb == [True, True]
+    assert np.allclose(table.linear(0)[0, 0, :3], eotf(c), rtol=1e-6)              # straight
     assoc = eotf(round(204 * 128 / 255) / 255)   # premultiplied 8-bit code 102, then the EOTF
-    assert np.allclose(textures.images[1][0, 0, :3], assoc, rtol=1e-5)                # associated
+    assert np.allclose(textures.images[1][0, 0, :3], 102 / 255, rtol=1e-7)          # the code
+    assert np.allclose(table.linear(1)[0, 0, :3], assoc, rtol=1e-5)                # associated
     assert _node(program, program["outputs"]["emission"])["params"]["texture"] == 1
     assert compiled.constants["emission"] == pytest.approx([assoc] * 3, rel=1e-5)
     # Non-Color images are never associated

@@ -73,6 +73,15 @@ def _quadrants(img):
     return q
 
 
+#: Normal-map and bump cases: a delta sun, a diffuse plane, max_depth 1 and one texel per
+#: quadrant make every pixel deterministic (zero estimator variance) in both renderers; the
+#: measured differences are float32 rounding, ≤ 2.6e-5 relative (bpy 5.0.1 and Blender
+#: 3.4.1). 1e-3 keeps a 40× margin and is 3.6× below the smallest model difference the tests
+#: must see: Cycles 3.4's bump shadowing (Chiang 2019) darkens one quadrant by 0.36 %, 5.0's
+#: (Estevez 2019) every quadrant by 1.2 % (ercuts_core/bump_shadowing.py).
+NORMAL_RTOL, NORMAL_ATOL = 1e-3, 1e-4
+
+
 def _skip_unless_textured(q):
     if np.ptp(q.reshape(-1, 3), axis=0).max() < 1e-3:
         pytest.skip("the core does not evaluate shading programs yet (uniform image)")
@@ -90,6 +99,23 @@ def test_textured_emission_matches_texels_and_cycles(tmp_path):
     assert np.allclose(qe, want, rtol=0.02, atol=2e-3)
 
 
+def test_linear_interpolation_of_srgb_texels_agrees_with_cycles(tmp_path):
+    """The 2×2 sRGB image magnified with Linear interpolation (EXTEND): Cycles interpolates
+    8-bit sRGB texels *encoded* and decodes after (compress_as_srgb); between the white and
+    the blue texel that is up to 29 % darker than interpolating linear values. Means of 8×8
+    blocks (8×6 pixels): the pixel-jitter noise of a block is ≤ 0.28 % at 64 spp (measured
+    seed to seed: 0.56 % at 16 spp); interpolating linear values is off by up to 197 % in
+    the dark channels of the middle blocks."""
+    _scene("ShaderNodeEmission")
+    tex = next(n for n in bpy.data.materials["Tex"].node_tree.nodes if n.type == "TEX_IMAGE")
+    tex.interpolation, tex.extension = "Linear", "EXTEND"
+    ercuts, cycles = render_both(tmp_path, max_depth=1, samples=64, cycles_samples=64,
+                                 integrator="PATH", tag="tex_linear")
+    be, bc = _blocks(ercuts, 8), _blocks(cycles, 8)
+    print("max relative block difference", np.abs(be / bc - 1).max())
+    assert np.allclose(be, bc, rtol=0.01, atol=1e-3)
+
+
 @pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
 def test_textured_diffuse_under_sun_agrees_with_cycles(tmp_path, integrator):
     _scene("ShaderNodeBsdfDiffuse")
@@ -104,7 +130,8 @@ def test_textured_diffuse_under_sun_agrees_with_cycles(tmp_path, integrator):
     assert np.allclose(qe, qc, rtol=0.03, atol=2e-3)
 
 
-def test_mix_shader_with_textured_factor_agrees_with_cycles(tmp_path):
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
+def test_mix_shader_with_textured_factor_agrees_with_cycles(tmp_path, integrator):
     """Mix(f = the texture's luminance, red diffuse, white diffuse) under a sun."""
     mat = h.node_material("Mixed", "ShaderNodeMixShader")
     nt = mat.node_tree
@@ -118,7 +145,7 @@ def test_mix_shader_with_textured_factor_agrees_with_cycles(tmp_path):
     _scene("", material=mat)
     h.light("SUN", location=(0, 0, 5), energy=3.0)
     ercuts, cycles = render_both(tmp_path, max_depth=1, samples=16, cycles_samples=16,
-                                 integrator="PATH", tag="tex_mix")
+                                 integrator=integrator, tag=f"tex_mix_{integrator}")
     qe, qc = _quadrants(ercuts), _quadrants(cycles)
     print("ercuts", np.round(qe, 4).tolist(), "cycles", np.round(qc, 4).tolist())
     f = TEXELS[..., :3] @ np.array([0.2126729, 0.7151522, 0.0721750])   # colour → float
@@ -127,7 +154,8 @@ def test_mix_shader_with_textured_factor_agrees_with_cycles(tmp_path):
     assert np.allclose(qe, qc, rtol=0.03, atol=2e-3)
 
 
-@pytest.mark.parametrize("integrator,mirror", [("PATH", False), ("BDPT", False), ("PATH", True)])
+@pytest.mark.parametrize("integrator,mirror", [("PATH", False), ("BDPT", False), ("ERCUTS", False),
+                                                ("PATH", True)])
 def test_normal_mapped_rotated_plane_agrees_with_cycles(tmp_path, integrator, mirror):
     """A constant tangent-space normal map tilting the normal towards +U, on a plane rotated
     about Z (world-space tangents) and lit by a sun from the side: cos θ follows the tilt."""
@@ -154,10 +182,11 @@ def test_normal_mapped_rotated_plane_agrees_with_cycles(tmp_path, integrator, mi
     qe, qc = _quadrants(ercuts), _quadrants(cycles)
     print("ercuts", np.round(qe, 4).tolist(), "cycles", np.round(qc, 4).tolist())
     assert abs(qc[0, 0, 0] - qc[1, 0, 0]) > 0.1 * qc.max()     # the tilt is visible in Cycles
-    assert np.allclose(qe, qc, rtol=0.03, atol=3e-3)
+    assert np.allclose(qe, qc, rtol=NORMAL_RTOL, atol=NORMAL_ATOL)
 
 
-def test_alpha_cutout_agrees_with_cycles(tmp_path):
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
+def test_alpha_cutout_agrees_with_cycles(tmp_path, integrator):
     """A plane cut out by its texture's alpha (Mix of Transparent and diffuse by Alpha) over a
     white floor, lit by a sun: the camera sees the floor through the holes, and the shadow."""
     mat = h.node_material("Leaf", "ShaderNodeMixShader")
@@ -176,16 +205,24 @@ def test_alpha_cutout_agrees_with_cycles(tmp_path):
     sun = h.light("SUN", location=(0, 0, 5), energy=3.0)
     sun.rotation_euler = (np.radians(20), 0, 0)
     ercuts, cycles = render_both(tmp_path, max_depth=2, samples=32, cycles_samples=64,
-                                 integrator="PATH", tag="tex_cutout")
+                                 integrator=integrator, tag=f"tex_cutout_{integrator}")
     qe, qc = _quadrants(ercuts), _quadrants(cycles)
     print("ercuts", np.round(qe, 4).tolist(), "cycles", np.round(qc, 4).tolist())
     assert np.allclose(qe, qc, rtol=0.05, atol=5e-3)
 
 
-@pytest.mark.parametrize("distance", [0.5, 2.0])
+_VIEW_REFLECTION_CLAMP = pytest.mark.xfail(
+    bpy.app.version < (3, 6, 0), strict=True,
+    reason="Cycles 3.0-3.5 bends every closure's normal so that the view's mirror reflection stays "
+           "0.01 above the surface (ensure_valid_reflection); here the bump tilts the normal 45°, "
+           "the head-on view's reflection grazes, and Cycles renders 0.14 % brighter; the core "
+           "does not bend normals")
+
+
+@pytest.mark.parametrize("distance", [0.5, pytest.param(2.0, marks=_VIEW_REFLECTION_CLAMP)])
 def test_bump_from_uv_height_agrees_with_cycles(tmp_path, distance):
     """Bump with Height = U (a linear ramp: finite differences are exact whatever the offset),
-    on a plane rotated about Z, lit by a sun from the side."""
+    on a plane rotated about Z, lit by a sun from the side (Distance 2: a 45° tilt)."""
     mat = h.node_material("Bumped", "ShaderNodeBsdfDiffuse", Color=(0.8, 0.8, 0.8))
     nt = mat.node_tree
     diffuse = next(n for n in nt.nodes if n.type == "BSDF_DIFFUSE")
@@ -205,7 +242,7 @@ def test_bump_from_uv_height_agrees_with_cycles(tmp_path, distance):
     print("ercuts", np.round(qe, 4).tolist(), "cycles", np.round(qc, 4).tolist())
     flat = 0.8 * 3.0 / np.pi * np.cos(np.radians(30))
     assert abs(qc.mean() / flat - 1) > 0.05                    # the bump is visible in Cycles
-    assert np.allclose(qe, qc, rtol=0.03, atol=3e-3)
+    assert np.allclose(qe, qc, rtol=NORMAL_RTOL, atol=NORMAL_ATOL)
 
 
 def _checker(n=8, a=(0.9, 0.9, 0.9), b=(0.1, 0.3, 0.8)):
@@ -270,7 +307,7 @@ def test_object_space_normal_map_on_a_rotated_plane_agrees_with_cycles(tmp_path)
     qe, qc = _quadrants(ercuts), _quadrants(cycles)
     print("ercuts", np.round(qe, 4).tolist(), "cycles", np.round(qc, 4).tolist())
     assert abs(qc[0, 0, 0] - qc[1, 0, 0]) > 0.1 * qc.max()
-    assert np.allclose(qe, qc, rtol=0.03, atol=3e-3)
+    assert np.allclose(qe, qc, rtol=NORMAL_RTOL, atol=NORMAL_ATOL)
 
 
 def _blocks(img, n=4):
@@ -311,3 +348,36 @@ def test_object_space_coordinates_on_a_transformed_box_agree_with_cycles(tmp_pat
     be, bc = _blocks(e), _blocks(c)
     print("max block difference", np.abs(be - bc).max(), "block mean", bc.mean())
     assert np.allclose(be, bc, rtol=0.06, atol=0.01)
+
+
+_LOBE_GAP = pytest.mark.xfail(strict=True, reason=(
+    "documented gap (README, Materials): the core's Principled is Lambert + one single-scattering "
+    "GGX lobe with a constant dielectric F0; Cycles 4+ adds Multiscatter GGX energy and a "
+    "Fresnel-weighted dielectric layer (measured here: -11 % rough metal, +3.2 % dielectric at "
+    "roughness 0.2)"))
+
+
+@pytest.mark.parametrize("metallic, roughness, distribution", [
+    (1.0, 0.3, "GGX"), (1.0, 0.6, "GGX"), (0.5, 0.5, "GGX"),
+    pytest.param(1.0, 0.6, "MULTI_GGX", marks=_LOBE_GAP),
+    pytest.param(0.0, 0.2, "GGX", marks=_LOBE_GAP),
+])
+def test_principled_lobe_agrees_with_cycles(tmp_path, metallic, roughness, distribution):
+    """A constant Principled floor under a sun seen at 37° (max_depth 1: every pixel is the
+    BSDF times the sun's irradiance, no estimator noise but the pixel jitter). Metals with
+    Cycles' single-scattering GGX agree to 0.01 % (measured); the xfails are the gap."""
+    if bpy.app.version < (4, 0, 0):
+        pytest.skip("Blender 3.x's Principled is Burley diffuse + Schlick (Principled v1)")
+    mat = h.node_material("P", "ShaderNodeBsdfPrincipled", base_color=(0.6, 0.5, 0.4),
+                          Roughness=roughness, Metallic=metallic)
+    next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED").distribution = distribution
+    h.plane("Floor", size=20, material=mat)
+    h.camera(location=(0, -4, 3), target=(0, 0, 0))
+    sun = h.light("SUN", location=(0, 0, 5), energy=3.0)
+    sun.rotation_euler = (np.radians(-30), 0, 0)
+    h.world((0, 0, 0))
+    e, c = render_both(tmp_path, max_depth=1, samples=64, cycles_samples=256, integrator="PATH",
+                       tag=f"lobe_{metallic}_{roughness}_{distribution}")
+    me, mc = e[..., :3].mean(), c[..., :3].mean()
+    print(f"principled metallic {metallic} roughness {roughness} {distribution}: rel {me / mc - 1:+.4f}")
+    assert me == pytest.approx(mc, rel=0.005)

@@ -163,28 +163,48 @@ def plan_round(start, count, node, unit, bound, intensity, acc_rad, acc_count, m
     return out[:m]
 
 
-@jit(inline=True)
-def _place(k_src, nd, u, lo, b, is_leaf, intensity, stochastic, p, w, node, unit, loss, bound, r,
-           rpt, rnode, runit, rloss, rbound, rad):
-    """Put one entry in the live arrays (slot w) or, with bound ≤ 0, retire it (slot r);
-    returns (w, r).  Stochastic: an empty non-leaf cluster is dropped."""
+@jit
+def _fate(b: float, leaf: bool, stochastic: bool) -> int:
+    """1: stays live (bound > 0); 2: retired (exact: bound 0, or a leaf of the stochastic
+    cut); 0: dropped (an empty cluster of the stochastic cut)."""
     if b > 0.0 or np.isnan(b):
-        node[w] = nd
-        bound[w] = b
-        for j in range(3):
-            unit[w, j] = u[k_src, j]
-            loss[w, j] = lo[k_src, j]
-        return w + 1, r
-    if stochastic and not is_leaf[nd]:
-        return w, r
-    rpt[r] = p
-    rnode[r] = nd
-    rbound[r] = b
-    for j in range(3):
-        runit[r, j] = u[k_src, j]
-        rloss[r, j] = lo[k_src, j]
-        rad[j] += u[k_src, j] * intensity[nd, j]
-    return w, r + 1
+        return 1
+    if stochastic and not leaf:
+        return 0
+    return 2
+
+
+@jit
+def _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, stochastic, node):
+    """Per slot of the merged list (unsplit entries then children, point by point): the
+    source (≥ 0 an old slot, < 0 the child −1 − q) and its fate (:func:`_fate`)."""
+    K, S = node.shape[0], sel.shape[0]
+    picked = np.zeros(K, np.bool_)
+    for j in range(S):
+        picked[sel[j]] = True
+    src = np.empty(K + S, np.int64)
+    fate = np.empty(K + S, np.int8)
+    pt = np.empty(K + S, np.int64)
+    m = 0
+    j0 = 0
+    for p in range(start.shape[0]):
+        s, c = start[p], count[p]
+        for k in range(s, s + c):
+            if not picked[k]:
+                src[m], pt[m] = k, p
+                fate[m] = _fate(bound[k], is_leaf[node[k]], stochastic)
+                m += 1
+        j1 = j0
+        while j1 < S and sel[j1] < s + c:
+            j1 += 1
+        for half in range(2):
+            for j in range(j0, j1):
+                q = half * S + j
+                src[m], pt[m] = -1 - q, p
+                fate[m] = _fate(kid_bound[q], is_leaf[kid_node[q]], stochastic)
+                m += 1
+        j0 = j1
+    return src[:m], fate[:m], pt[:m]
 
 
 @jit
@@ -207,43 +227,46 @@ def apply_round(start, count, node, unit, loss, bound, sel, kid_node, kid_unit, 
         (pt, node, unit, loss, bound) of the retired ones (grouped by point).
     """
     P = start.shape[0]
-    K, S = node.shape[0], sel.shape[0]
-    picked = np.zeros(K, np.bool_)
-    for j in range(S):
-        picked[sel[j]] = True
-    cap = K + S
-    n_start, n_count = np.empty(P, np.int64), np.empty(P, np.int64)
-    n_node, n_bound = np.empty(cap, np.int64), np.empty(cap)
-    n_unit, n_loss = np.empty((cap, 3)), np.empty((cap, 3))
-    rpt, rnode, rbound = np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap)
-    runit, rloss = np.empty((cap, 3)), np.empty((cap, 3))
+    src, fate, pt = _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, stochastic, node)
+    n_live = n_ret = 0
+    for i in range(src.shape[0]):
+        n_live += fate[i] == 1
+        n_ret += fate[i] == 2
+    n_count = np.zeros(P, np.int64)
+    n_node, n_bound = np.empty(n_live, np.int64), np.empty(n_live)
+    n_unit, n_loss = np.empty((n_live, 3)), np.empty((n_live, 3))
+    rpt, rnode, rbound = np.empty(n_ret, np.int64), np.empty(n_ret, np.int64), np.empty(n_ret)
+    runit, rloss = np.empty((n_ret, 3)), np.empty((n_ret, 3))
+    rad = np.zeros((P, 3))
     w = r = 0
-    j0 = 0
-    rad = np.zeros(3)
-    for p in range(P):
-        s, c = start[p], count[p]
-        n_start[p] = w
-        r0 = r
-        rad[:] = 0.0
-        for k in range(s, s + c):
-            if not picked[k]:
-                w, r = _place(k, node[k], unit, loss, bound[k], is_leaf, intensity, stochastic, p,
-                              w, n_node, n_unit, n_loss, n_bound, r, rpt, rnode, runit, rloss,
-                              rbound, rad)
-        j1 = j0
-        while j1 < S and s <= sel[j1] < s + c:
-            j1 += 1
-        for half in range(2):
-            for j in range(j0, j1):
-                q = half * S + j
-                w, r = _place(q, kid_node[q], kid_unit, kid_loss, kid_bound[q], is_leaf,
-                              intensity, stochastic, p, w, n_node, n_unit, n_loss, n_bound, r,
-                              rpt, rnode, runit, rloss, rbound, rad)
-        j0 = j1
-        n_count[p] = w - n_start[p]
-        if r > r0:
+    for i in range(src.shape[0]):
+        f = fate[i]
+        if f == 0:
+            continue
+        k = src[i]
+        q = -1 - k
+        nd = node[k] if k >= 0 else kid_node[q]
+        b = bound[k] if k >= 0 else kid_bound[q]
+        if f == 1:
+            n_node[w], n_bound[w] = nd, b
             for j in range(3):
-                acc_rad[p, j] = acc_rad[p, j] + rad[j]
-            acc_count[p] += r - r0
-    return (n_start, n_count, n_node[:w], n_unit[:w], n_loss[:w], n_bound[:w],
-            rpt[:r], rnode[:r], runit[:r], rloss[:r], rbound[:r])
+                n_unit[w, j] = unit[k, j] if k >= 0 else kid_unit[q, j]
+                n_loss[w, j] = loss[k, j] if k >= 0 else kid_loss[q, j]
+            n_count[pt[i]] += 1
+            w += 1
+        else:
+            p = pt[i]
+            rpt[r], rnode[r], rbound[r] = p, nd, b
+            for j in range(3):
+                runit[r, j] = unit[k, j] if k >= 0 else kid_unit[q, j]
+                rloss[r, j] = loss[k, j] if k >= 0 else kid_loss[q, j]
+                rad[p, j] += runit[r, j] * intensity[nd, j]
+            acc_count[p] += 1
+            r += 1
+    n_start = np.zeros(P, np.int64)
+    for p in range(1, P):
+        n_start[p] = n_start[p - 1] + n_count[p - 1]
+    for p in range(P):
+        for j in range(3):
+            acc_rad[p, j] = acc_rad[p, j] + rad[p, j]
+    return n_start, n_count, n_node, n_unit, n_loss, n_bound, rpt, rnode, runit, rloss, rbound

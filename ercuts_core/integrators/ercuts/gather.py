@@ -19,7 +19,7 @@ from ...scene import BuiltScene
 from ...settings import RenderSettings
 from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
 from .pacing import GatherPace, Schedule
-from .stochastic_lightcuts import stochastic_lightcut
+from .stochastic_lightcuts import leaf_cdf, stochastic_lightcut
 from .vpl import GBuffer
 
 #: Absolute lightcut error floor as a fraction of max_error × the mean pixel luminance.
@@ -167,6 +167,7 @@ class _Sweep:
         self.f_bound = scene.bsdf_max_value(gather.g.mat, gather.g.p)
         self.clamp = 0.0 if not np.isfinite(gmax) else gmax
         self.share = emitter_share(tree, vpls) if tree is not None else None
+        self.cdf = leaf_cdf(tree) if tree is not None and s.gather == "STOCHASTIC" else None
         self.rays, self.clamped, self.unmet = 0, 0.0, 0
         self.stats = stats
         self.pace = GatherPace(s.max_error, s.max_cut_size)
@@ -224,7 +225,7 @@ class _Sweep:
             rng = np.random.default_rng([s.seed, PASS_SALT, pass_index, start])
             res = stochastic_lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
                                       rng, cut_size=min(pace.cap, s.stochastic_cut_size),
-                                      clamp=self.clamp)
+                                      clamp=self.clamp, cdf=self.cdf)
         else:
             res = lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
                            max_error=pace.error, max_cut_size=pace.cap, clamp=self.clamp,

@@ -32,7 +32,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from ... import kernels
 from ...arrays import take_rows
+from ...kernels import refine
+from .cut_rounds import run_rounds
 from .light_tree import LightTree, luminance
 from .lightcuts import (LightcutResult, ShadingPoints, _Entries, _select, cluster_bound,
                         evaluate_lights)
@@ -51,6 +54,8 @@ def stochastic_cut(tree: LightTree, pts: ShadingPoints, cut_size: int,
     pidx = np.arange(n_pts)
     root = np.full(n_pts, tree.root, np.int64)
     e = _bare(tree, pts, pidx, root, clamp)
+    if kernels.enabled():
+        return _stochastic_cut_compiled(tree, pts, e, cut_size, clamp)
     final: list[_Entries] = []
     count = np.ones(n_pts, np.int64)          # cut entries per point (live + final)
     while e.pt.size:
@@ -74,6 +79,21 @@ def stochastic_cut(tree: LightTree, pts: ShadingPoints, cut_size: int,
     cut = _Entries.cat(final + [e])
     order = np.argsort(cut.pt, kind="stable")
     return cut.pt[order], cut.node[order]
+
+
+def _stochastic_cut_compiled(tree: LightTree, pts: ShadingPoints, root: _Entries, cut_size: int,
+                             clamp: float) -> tuple[NDArray, NDArray]:
+    """:func:`stochastic_cut` on the compiled kernels (:func:`.cut_rounds.run_rounds`, the
+    same rounds and cut entries in the same order)."""
+    def children(pt, node, unit, loss):
+        kids = _bare(tree, pts, np.concatenate([pt, pt]),
+                     np.concatenate([take_rows(tree.left, node), take_rows(tree.right, node)]), clamp)
+        return kids.node, kids.unit, kids.loss, kids.bound, 0
+
+    z = np.zeros((pts.count, 3))
+    r = run_rounds(tree, pts.count, z, z, root.bound, children, mode=refine.MODE_STOCHASTIC,
+                   max_cut_size=cut_size, band=_BAND)
+    return r.pt, r.node
 
 
 def _bare(tree: LightTree, pts: ShadingPoints, pt: NDArray, node: NDArray,
@@ -115,13 +135,16 @@ def sample_leaves(tree: LightTree, cdf: NDArray, node: NDArray, u: NDArray
 
 def stochastic_lightcut(tree: LightTree, vpl_pos: NDArray, vpl_normal: NDArray,
                         vpl_intensity: NDArray, pts: ShadingPoints, rng: np.random.Generator,
-                        *, cut_size: int = 32, clamp: float = 0.0) -> LightcutResult:
+                        *, cut_size: int = 32, clamp: float = 0.0,
+                        cdf: NDArray | None = None) -> LightcutResult:
     """Stochastic-lightcut radiance at P shading points (module docstring).
 
     Args:
         tree, vpl_pos, vpl_normal, vpl_intensity, pts, clamp: as :func:`.lightcuts.lightcut`.
         rng: the generator of the VPL draws (deterministic per seed).
         cut_size: nodes per point at most (≥ 1).
+        cdf: :func:`leaf_cdf` of ``tree`` when the caller keeps it (computed otherwise; it
+            cost 6 % of the gather at 1280×720 when recomputed per batch).
 
     Returns:
         :class:`~.lightcuts.LightcutResult` with the cut entries (``cut_node`` is the
@@ -140,7 +163,8 @@ def stochastic_lightcut(tree: LightTree, vpl_pos: NDArray, vpl_normal: NDArray,
         return LightcutResult(np.zeros((n_pts, 3)), np.zeros(n_pts, np.int64), 0.0, 0, 0,
                               z, z, np.zeros((0, 3)), np.zeros(0), np.zeros(n_pts, bool))
     pt, node = stochastic_cut(tree, pts, cut_size, clamp)
-    vpl, weight = sample_leaves(tree, leaf_cdf(tree), node, rng.random(pt.size))
+    vpl, weight = sample_leaves(tree, leaf_cdf(tree) if cdf is None else cdf, node,
+                                rng.random(pt.size))
     unit, loss, rays = evaluate_lights(pts, pt, vpl, pos, nrm, clamp)
     scale = take_rows(inten, vpl) * weight[:, None]
     est = unit * scale

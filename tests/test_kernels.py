@@ -173,3 +173,19 @@ def test_fallback_without_numba_warns_once_and_renders_the_same() -> None:
         r = lightcut(tree, *lights, pts, error_mode="total")
     np.testing.assert_allclose(np.load(out), r.radiance, rtol=1e-12, atol=0.0)
     os.remove(out)
+
+
+def test_brute_force_stops_after_one_block_when_cancelled() -> None:
+    """Esc in the brute-force gather (issue 17): ``keep_going`` is polled after every block of
+    ≤ 2^20 pairs, so a cancel waits for one block, not for the whole batch."""
+    from ercuts_core.integrators.ercuts import lightcuts as lc
+    lights, pts = room_scene(3000, 1000, 13)             # 3·10⁶ pairs: three blocks
+    calls = []
+    vis = pts.visible
+    counted = lc.ShadingPoints(pts.p, pts.n, pts.wo, pts.f_bound, pts.eval_f,
+                               lambda i, q, qn: calls.append(len(i)) or vis(i, q, qn))
+    assert lc.brute_force(*lights, counted, keep_going=lambda: False) is None
+    assert len(calls) == 1
+    calls.clear()
+    full = lc.brute_force(*lights, counted, keep_going=lambda: True)
+    assert len(calls) == 3 and np.array_equal(full, lc.brute_force(*lights, pts))

@@ -188,39 +188,46 @@ class _Sweep:
         L = np.zeros((2, Q, 3))              # [from emitter VPLs, from the others]
         cut = np.zeros(Q)
         done_pt = ~g.valid                   # misses need no gather
-        done, pace = 0, self.pace
+        done, pace, stopped = 0, self.pace, False
         # A small first batch calibrates the cost per point before the cap is fitted.
         step = min(ga.gather_batch, PROGRESS_GATHER_POINTS)
         edges = np.unique(np.r_[0, np.arange(min(256, len(pts_all)), len(pts_all), step), len(pts_all)])
         for start, stop in zip(edges[:-1], edges[1:]):
             idx = pts_all[start:stop]
             t_batch = time.perf_counter()
-            self._batch(idx, start, pass_index, L, cut)
+            if not self._batch(idx, start, pass_index, L, cut):
+                stopped = True                  # brute force: the batch was abandoned
+                break
             done = start + len(idx)
             done_pt[idx] = True
             if pass_index == 0:
                 pace.update(len(idx), time.perf_counter() - t_batch, cut[idx].mean(),
                             len(pts_all) - done, self.schedule.remaining())
             if not self._report(done) and done < len(pts_all):
-                if pass_index == 0:
-                    self.stats["gather_incomplete"] = 1
-                    self.schedule.clock.cancelled = True
+                stopped = True
                 break
             show(L, done_pt.reshape(-1, S).all(axis=1))
+        if stopped and pass_index == 0:
+            self.stats["gather_incomplete"] = 1
+            self.schedule.clock.cancelled = True
         return L, cut, done_pt, done
 
-    def _batch(self, idx: NDArray, start: int, pass_index: int, L: NDArray, cut: NDArray) -> None:
-        """Gather the points ``idx`` into ``L`` and ``cut``."""
+    def _batch(self, idx: NDArray, start: int, pass_index: int, L: NDArray, cut: NDArray) -> bool:
+        """Gather the points ``idx`` into ``L`` and ``cut``; False when a cancel abandoned
+        the batch (brute force only: the cuts of a cancelled lightcut batch stay complete)."""
         s, vpls, tree, pace = self.gather.settings, self.vpls, self.tree, self.pace
         pts = self.gather._shading_points(idx, self.f_bound)
         if s.gather == "BRUTE_FORCE":
             for part, sel in enumerate((vpls.emitter, ~vpls.emitter)):
                 if sel.any():
-                    L[part, idx] = brute_force(vpls.position[sel], vpls.normal[sel],
-                                               vpls.intensity[sel], pts, clamp=self.clamp)
+                    got = brute_force(vpls.position[sel], vpls.normal[sel], vpls.intensity[sel],
+                                      pts, clamp=self.clamp, keep_going=lambda: self._report(start))
+                    if got is None:
+                        return False
+                    L[part, idx] = got
             cut[idx] = len(vpls)
             self.rays += len(idx) * len(vpls)
-            return
+            return True
         if s.gather == "STOCHASTIC":
             rng = np.random.default_rng([s.seed, PASS_SALT, pass_index, start])
             res = stochastic_lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
@@ -236,6 +243,7 @@ class _Sweep:
         self.rays += res.shadow_rays
         self.clamped += res.clamped_energy
         self.unmet += int(res.unmet.sum())
+        return True
 
     def record(self, stats: dict, done: int, cut: NDArray) -> None:
         """The gather's statistics (first pass's cuts; rays and clamp of every pass)."""

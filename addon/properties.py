@@ -216,6 +216,13 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
                      "each evaluated with one virtual point light drawn for the point"),
         default=_default("stochastic_cut_size", 32), min=1, soft_max=1024,
     )
+    stochastic_cut_sharing: IntProperty(
+        name="Cut Sharing",
+        description=("Neighbouring shading points (in a pixel row) that share one Stochastic "
+                     "Lightcuts cut, refined once for them (1 = off); points across an edge keep "
+                     "their own. Each point still draws its own lights (unbiased)"),
+        default=_default("stochastic_cut_sharing", 1), min=1, soft_max=16,
+    )
     clamp: FloatProperty(
         name="VPL Clamp",
         description=("Virtual point light clamp: minimum distance as a fraction of the scene's "

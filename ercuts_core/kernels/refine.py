@@ -164,18 +164,18 @@ def plan_round(start, count, node, unit, bound, intensity, acc_rad, acc_count, m
 
 
 @jit
-def _fate(b: float, leaf: bool, stochastic: bool) -> int:
-    """1: stays live (bound > 0); 2: retired (exact: bound 0, or a leaf of the stochastic
-    cut); 0: dropped (an empty cluster of the stochastic cut)."""
+def _fate(b: float, leaf: bool, drop_empty: bool) -> int:
+    """1: stays live (bound > 0); 2: retired (bound 0: exact, a leaf, or an empty cluster
+    kept in the cut); 0: dropped (an empty cluster, with ``drop_empty``)."""
     if b > 0.0 or np.isnan(b):
         return 1
-    if stochastic and not leaf:
+    if drop_empty and not leaf:
         return 0
     return 2
 
 
 @jit
-def _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, stochastic, node):
+def _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, drop_empty, node):
     """Per slot of the merged list (unsplit entries then children, point by point): the
     source (≥ 0 an old slot, < 0 the child −1 − q) and its fate (:func:`_fate`)."""
     K, S = node.shape[0], sel.shape[0]
@@ -192,7 +192,7 @@ def _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, stochastic,
         for k in range(s, s + c):
             if not picked[k]:
                 src[m], pt[m] = k, p
-                fate[m] = _fate(bound[k], is_leaf[node[k]], stochastic)
+                fate[m] = _fate(bound[k], is_leaf[node[k]], drop_empty)
                 m += 1
         j1 = j0
         while j1 < S and sel[j1] < s + c:
@@ -201,7 +201,7 @@ def _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, stochastic,
             for j in range(j0, j1):
                 q = half * S + j
                 src[m], pt[m] = -1 - q, p
-                fate[m] = _fate(kid_bound[q], is_leaf[kid_node[q]], stochastic)
+                fate[m] = _fate(kid_bound[q], is_leaf[kid_node[q]], drop_empty)
                 m += 1
         j0 = j1
     return src[:m], fate[:m], pt[:m]
@@ -209,7 +209,7 @@ def _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, stochastic,
 
 @jit
 def apply_round(start, count, node, unit, loss, bound, sel, kid_node, kid_unit, kid_loss,
-                kid_bound, is_leaf, stochastic, intensity, acc_rad, acc_count):
+                kid_bound, is_leaf, drop_empty, intensity, acc_rad, acc_count):
     """The next round's live entries and this round's retired ones (step 2).
 
     Args:
@@ -218,7 +218,8 @@ def apply_round(start, count, node, unit, loss, bound, sel, kid_node, kid_unit, 
         kid_node, kid_unit, kid_loss, kid_bound: (2S,) children, the ones sharing the
             parent's representative first, then the others, aligned with sel.
         is_leaf, intensity: (n_nodes,) and (n_nodes,3) of the tree.
-        stochastic: retire leaves and drop empty clusters (else retire every bound-0 entry).
+        drop_empty: drop empty clusters (bound 0, not leaves: the stochastic cut of one point)
+            instead of retiring them with the other bound-0 entries.
         acc_rad (P,3), acc_count (P,): updated in place with the retired entries
             (radiance Σ M_r G_r V_r I_C; the per-point sum starts at 0 as numpy's bincount).
 
@@ -227,7 +228,7 @@ def apply_round(start, count, node, unit, loss, bound, sel, kid_node, kid_unit, 
         (pt, node, unit, loss, bound) of the retired ones (grouped by point).
     """
     P = start.shape[0]
-    src, fate, pt = _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, stochastic, node)
+    src, fate, pt = _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, drop_empty, node)
     n_live = n_ret = 0
     for i in range(src.shape[0]):
         n_live += fate[i] == 1

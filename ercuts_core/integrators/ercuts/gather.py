@@ -39,6 +39,12 @@ PASS_SALT = 0x5C7
 PASS_MARGIN = 1.2
 #: Consecutive shading points kept together in the shuffled gather order (coherent rays).
 GATHER_RUN = 32
+#: Cut sharing (``stochastic_cut_sharing``): a point shares its block's cut when its shading
+#: normal is within this cosine of the block head's, it lies within SHARE_PLANE·distance of
+#: the head's tangent plane, in the same pixel row, with the same material (else: an edge,
+#: its own cut).
+SHARE_COS = 0.95
+SHARE_PLANE = 0.05
 #: Glossy shading points get the per-cluster GGX material bound (:class:`.lightcuts.
 #: GlossyReceivers`); False falls back to the constant lobe-peak bound of ``bsdf_max_value``,
 #: which glossy lobes exceed (kept for benchmarks/bench_glossy_bound.py's comparison only).
@@ -168,7 +174,7 @@ class _Sweep:
         self.clamp = 0.0 if not np.isfinite(gmax) else gmax
         self.share = emitter_share(tree, vpls) if tree is not None else None
         self.cdf = leaf_cdf(tree) if tree is not None and s.gather == "STOCHASTIC" else None
-        self.rays, self.clamped, self.unmet = 0, 0.0, 0
+        self.rays, self.clamped, self.unmet, self.shared = 0, 0.0, 0, 0
         self.stats = stats
         self.pace = GatherPace(s.max_error, s.max_cut_size)
 
@@ -230,9 +236,14 @@ class _Sweep:
             return True
         if s.gather == "STOCHASTIC":
             rng = np.random.default_rng([s.seed, PASS_SALT, pass_index, start])
+            ref = (share_refs(self.gather.g, idx, s.stochastic_cut_sharing,
+                              self.gather.scene.camera.window.width)
+                   if s.stochastic_cut_sharing > 1 else None)
             res = stochastic_lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
                                       rng, cut_size=min(pace.cap, s.stochastic_cut_size),
-                                      clamp=self.clamp, cdf=self.cdf)
+                                      clamp=self.clamp, cdf=self.cdf, ref=ref)
+            if ref is not None:
+                self.shared += int(np.count_nonzero(ref != np.arange(len(idx))))
         else:
             res = lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
                            max_error=pace.error, max_cut_size=pace.cap, clamp=self.clamp,
@@ -255,6 +266,9 @@ class _Sweep:
         # Points whose cut hit the size cap (or the pacing) before the error rule held.
         stats["cut_bound_unmet"] = self.unmet / done if done else 0.0
         stats["gather_shadow_rays"] = self.rays
+        if self.gather.settings.gather == "STOCHASTIC" and self.gather.settings.stochastic_cut_sharing > 1:
+            # share of the gathered points that used a neighbour's cut (the rest: block heads, edges)
+            stats["shared_cut_fraction"] = self.shared / max(done * stats.get("gather_passes", 1), 1)
         stats["clamped_energy"] = self.clamped / S / stats.get("gather_passes", 1)
 
 
@@ -267,6 +281,23 @@ def spread_order(points: NDArray, seed: int) -> NDArray:
     starts = runs[order]
     idx = (starts[:, None] + np.arange(GATHER_RUN)[None, :]).ravel()
     return points[idx[idx < len(points)]]
+
+
+def share_refs(g: GBuffer, idx: NDArray, block: int, width: int) -> NDArray:
+    """(P,) for the batch's points ``idx`` (G-buffer entries in gather order), the local index
+    of the point whose stochastic cut each uses: the head of its block of ``block``
+    consecutive points when both are alike (:data:`SHARE_COS`, :data:`SHARE_PLANE`, same
+    row and material), else itself.  Which cut a point uses changes only its noise: the
+    shared cut keeps its empty clusters (:func:`.stochastic_lightcuts.shared_cut`)."""
+    j = np.arange(len(idx))
+    head = j - j % block
+    p, n = g.p[idx], g.ns[idx]
+    d = p - p[head]
+    dist = np.sqrt(np.einsum("ij,ij->i", d, d))
+    alike = ((g.mat[idx] == g.mat[idx[head]]) & (g.pixel[idx] // width == g.pixel[idx[head]] // width)
+             & (np.einsum("ij,ij->i", n, n[head]) >= SHARE_COS)
+             & (np.abs(np.einsum("ij,ij->i", d, n[head])) <= SHARE_PLANE * dist))
+    return np.where(alike, head, j)
 
 
 def emitter_share(tree, vpls) -> NDArray:

@@ -45,25 +45,27 @@ _BAND = 0.25
 
 
 def stochastic_cut(tree: LightTree, pts: ShadingPoints, cut_size: int,
-                   clamp: float = 0.0) -> tuple[NDArray, NDArray]:
+                   clamp: float = 0.0, keep_empty: bool = False) -> tuple[NDArray, NDArray]:
     """The cut of every point (step 1 of the module docstring): (C,) point indices and (C,)
     node ids, sorted by point, at most ``cut_size`` per point; nodes with a zero bound that
-    are not leaves are dropped (they carry no light to the point).  Lock-step rounds over
-    flat arrays, no shadow rays."""
+    are not leaves are dropped (they carry no light to the point) unless ``keep_empty``
+    (the cut is a partition of all VPLs, for other points to share: they may see light
+    from those nodes).  Lock-step rounds over flat arrays, no shadow rays."""
     n_pts = pts.count
     pidx = np.arange(n_pts)
     root = np.full(n_pts, tree.root, np.int64)
     e = _bare(tree, pts, pidx, root, clamp)
     if kernels.enabled():
-        return _stochastic_cut_compiled(tree, pts, e, cut_size, clamp)
+        return _stochastic_cut_compiled(tree, pts, e, cut_size, clamp, keep_empty)
     final: list[_Entries] = []
     count = np.ones(n_pts, np.int64)          # cut entries per point (live + final)
     while e.pt.size:
         leaf = take_rows(tree.is_leaf, e.node)
         done = leaf | (e.bound <= 0.0)
         if np.any(done):
-            final.append(e.take(np.flatnonzero(leaf)))
-            count -= np.bincount(e.pt[done & ~leaf], minlength=n_pts)
+            final.append(e.take(np.flatnonzero(done if keep_empty else leaf)))
+            if not keep_empty:
+                count -= np.bincount(e.pt[done & ~leaf], minlength=n_pts)
             e = e.take(np.flatnonzero(~done))
         sel = _select(e, e.bound, np.zeros(e.pt.size), cut_size - count, _BAND)
         if sel.size == 0:
@@ -82,7 +84,7 @@ def stochastic_cut(tree: LightTree, pts: ShadingPoints, cut_size: int,
 
 
 def _stochastic_cut_compiled(tree: LightTree, pts: ShadingPoints, root: _Entries, cut_size: int,
-                             clamp: float) -> tuple[NDArray, NDArray]:
+                             clamp: float, keep_empty: bool) -> tuple[NDArray, NDArray]:
     """:func:`stochastic_cut` on the compiled kernels (:func:`.cut_rounds.run_rounds`, the
     same rounds and cut entries in the same order)."""
     def children(pt, node, unit, loss):
@@ -92,8 +94,36 @@ def _stochastic_cut_compiled(tree: LightTree, pts: ShadingPoints, root: _Entries
 
     z = np.zeros((pts.count, 3))
     r = run_rounds(tree, pts.count, z, z, root.bound, children, mode=refine.MODE_STOCHASTIC,
-                   max_cut_size=cut_size, band=_BAND)
+                   max_cut_size=cut_size, band=_BAND, keep_empty=keep_empty)
     return r.pt, r.node
+
+
+def shared_cut(tree: LightTree, pts: ShadingPoints, ref: NDArray, cut_size: int,
+               clamp: float = 0.0) -> tuple[NDArray, NDArray]:
+    """Cuts shared between points (``stochastic_cut_sharing``): point i uses the cut refined
+    at point ``ref[i]`` (``ref[ref[i]] == ref[i]``), with its empty clusters kept, so it
+    covers every VPL and each point's estimate stays unbiased; only the cut's *choice* (the
+    bounds, hence the noise) is the reference point's.  Returns (C,) points, (C,) nodes
+    sorted by point, like :func:`stochastic_cut`."""
+    refs, local = np.unique(ref, return_inverse=True)
+    rpt, rnode = stochastic_cut(tree, _subset(pts, refs), cut_size, clamp, keep_empty=True)
+    count = np.bincount(rpt, minlength=len(refs))
+    first = np.cumsum(count) - count
+    c = count[local]
+    pt = np.repeat(np.arange(pts.count), c)
+    offset = np.arange(pt.size) - np.repeat(np.cumsum(c) - c, c)
+    return pt, rnode[np.repeat(first[local], c) + offset]
+
+
+def _subset(pts: ShadingPoints, idx: NDArray) -> ShadingPoints:
+    """The points ``idx`` of ``pts`` for the bounds (the callbacks are not used by the cut)."""
+    glossy = pts.glossy
+    if glossy is not None:
+        glossy = type(glossy)(*(np.asarray(getattr(glossy, f))[idx] for f in
+                                ("mask", "r", "kd_pi", "spec", "cos_o", "alpha")))
+    tr = None if pts.transmissive is None else np.asarray(pts.transmissive)[idx]
+    return ShadingPoints(pts.p[idx], pts.n[idx], pts.wo[idx], pts.f_bound[idx], pts.eval_f,
+                         pts.visible, transmissive=tr, glossy=glossy)
 
 
 def _bare(tree: LightTree, pts: ShadingPoints, pt: NDArray, node: NDArray,
@@ -136,7 +166,7 @@ def sample_leaves(tree: LightTree, cdf: NDArray, node: NDArray, u: NDArray
 def stochastic_lightcut(tree: LightTree, vpl_pos: NDArray, vpl_normal: NDArray,
                         vpl_intensity: NDArray, pts: ShadingPoints, rng: np.random.Generator,
                         *, cut_size: int = 32, clamp: float = 0.0,
-                        cdf: NDArray | None = None) -> LightcutResult:
+                        cdf: NDArray | None = None, ref: NDArray | None = None) -> LightcutResult:
     """Stochastic-lightcut radiance at P shading points (module docstring).
 
     Args:
@@ -145,6 +175,7 @@ def stochastic_lightcut(tree: LightTree, vpl_pos: NDArray, vpl_normal: NDArray,
         cut_size: nodes per point at most (≥ 1).
         cdf: :func:`leaf_cdf` of ``tree`` when the caller keeps it (computed otherwise; it
             cost 6 % of the gather at 1280×720 when recomputed per batch).
+        ref: optional (P,) reference point of each point's cut (:func:`shared_cut`).
 
     Returns:
         :class:`~.lightcuts.LightcutResult` with the cut entries (``cut_node`` is the
@@ -162,7 +193,8 @@ def stochastic_lightcut(tree: LightTree, vpl_pos: NDArray, vpl_normal: NDArray,
         z = np.zeros(0, np.int64)
         return LightcutResult(np.zeros((n_pts, 3)), np.zeros(n_pts, np.int64), 0.0, 0, 0,
                               z, z, np.zeros((0, 3)), np.zeros(0), np.zeros(n_pts, bool))
-    pt, node = stochastic_cut(tree, pts, cut_size, clamp)
+    pt, node = (stochastic_cut(tree, pts, cut_size, clamp) if ref is None
+                else shared_cut(tree, pts, ref, cut_size, clamp))
     vpl, weight = sample_leaves(tree, leaf_cdf(tree) if cdf is None else cdf, node,
                                 rng.random(pt.size))
     unit, loss, rays = evaluate_lights(pts, pt, vpl, pos, nrm, clamp)

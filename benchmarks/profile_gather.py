@@ -104,8 +104,8 @@ def capture(w: int, h: int, time_limit: float, gather: str) -> list[str]:
     return lines
 
 
-def _gather_once(state, scene, mode: str, pts: np.ndarray, seed: int):
-    s = RenderSettings(gather=mode, seed=seed)
+def _gather_once(state, scene, mode: str, pts: np.ndarray, seed: int, sharing: int = 1):
+    s = RenderSettings(gather=mode, seed=seed, stochastic_cut_sharing=sharing)
     g = state["g"]
     ga = gather_mod.Gather(scene, s, g, state["batch"])
     sched = Schedule(Clock(0.0, None, None), direct_vpls=False, paced=False)
@@ -167,6 +167,39 @@ def gather_profile(w: int, h: int, n_points: int, modes: list[str], repeats: int
     return lines
 
 
+def sharing_sweep(w: int, h: int, n_points: int, blocks: list[int], repeats: int) -> list[str]:
+    """Stochastic gather with cut sharing over ``blocks``: time per point and error against
+    the bounded gather (2 %, 'TOTAL', cut ≤ 1000) at the same points, interleaved."""
+    with open(state_path(w, h), "rb") as fh:
+        state = pickle.load(fh)
+    scene = BuiltScene(sanitize(scenes.s_corridor(w, h)).desc)
+    g = state["g"]
+    pts = gather_mod.spread_order(np.flatnonzero(g.valid), 0)[:n_points]
+    _, ref, _, _ = _gather_once(state, scene, "LIGHTCUTS", pts, 0)
+    y_ref = ref.sum(axis=0)[pts] @ np.array([0.2126, 0.7152, 0.0722])
+    lines = [f"## cut sharing {w}×{h}: {len(pts)} points, reference = bounded gather "
+             f"({time.strftime('%Y-%m-%d %H:%M')}, load {os.getloadavg()[0]:.1f}, "
+             f"backend {'numba' if kernels.enabled() else 'numpy'})", "",
+             "| block | µs/point (best of runs) | relMSE vs bounded | relMSE × time | shared |",
+             "|---|---|---|---|---|"]
+    times = {b: [] for b in blocks}
+    errs = {b: [] for b in blocks}
+    for r in range(repeats):
+        for b in blocks:
+            _gather_once(state, scene, "STOCHASTIC", pts[:1024], r, b)
+            dt, L, _, _ = _gather_once(state, scene, "STOCHASTIC", pts, r, b)
+            y = L.sum(axis=0)[pts] @ np.array([0.2126, 0.7152, 0.0722])
+            times[b].append(dt)
+            errs[b].append(float(np.sum((y - y_ref) ** 2) / np.sum(y_ref ** 2)))
+    for b in blocks:
+        t, e = min(times[b]), float(np.mean(errs[b]))
+        j = np.arange(len(pts))
+        lines.append(f"| {b} | {1e6 * t / len(pts):.0f} | {e:.4f} | {e * t:.4f} | "
+                     f"{'-' if b == 1 else 'see stats'} |")
+    scene.close()
+    return lines + [""]
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--capture", action="store_true")
@@ -177,6 +210,7 @@ def main(argv=None) -> None:
     ap.add_argument("--points", type=int, default=20000)
     ap.add_argument("--modes", nargs="+", default=["LIGHTCUTS", "STOCHASTIC"])
     ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--sharing", nargs="*", type=int, help="cut-sharing blocks to sweep, e.g. 1 2 4 8")
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
     lines = []
@@ -184,6 +218,8 @@ def main(argv=None) -> None:
         lines += capture(w, h, args.time_limit, args.capture_gather)
     if args.gather:
         lines += gather_profile(w, h, args.points, args.modes, args.repeats)
+    if args.sharing:
+        lines += sharing_sweep(w, h, args.points, args.sharing, args.repeats)
     print("\n".join(lines))
     os.makedirs(os.path.dirname(OUT), exist_ok=True)
     with open(OUT, "a") as fh:

@@ -180,8 +180,8 @@ def sharing_sweep(w: int, h: int, n_points: int, blocks: list[int], repeats: int
     lines = [f"## cut sharing {w}×{h}: {len(pts)} points, reference = bounded gather "
              f"({time.strftime('%Y-%m-%d %H:%M')}, load {os.getloadavg()[0]:.1f}, "
              f"backend {'numba' if kernels.enabled() else 'numpy'})", "",
-             "| block | µs/point (best of runs) | relMSE vs bounded | relMSE × time | shared |",
-             "|---|---|---|---|---|"]
+             "| block | µs/point (best of runs) | relMSE vs bounded | relMSE × time |",
+             "|---|---|---|---|"]
     times = {b: [] for b in blocks}
     errs = {b: [] for b in blocks}
     for r in range(repeats):
@@ -193,9 +193,7 @@ def sharing_sweep(w: int, h: int, n_points: int, blocks: list[int], repeats: int
             errs[b].append(float(np.sum((y - y_ref) ** 2) / np.sum(y_ref ** 2)))
     for b in blocks:
         t, e = min(times[b]), float(np.mean(errs[b]))
-        j = np.arange(len(pts))
-        lines.append(f"| {b} | {1e6 * t / len(pts):.0f} | {e:.4f} | {e * t:.4f} | "
-                     f"{'-' if b == 1 else 'see stats'} |")
+        lines.append(f"| {b} | {1e6 * t / len(pts):.0f} | {e:.4f} | {e * t:.4f} |")
     scene.close()
     return lines + [""]
 

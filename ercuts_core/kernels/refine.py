@@ -164,18 +164,19 @@ def plan_round(start, count, node, unit, bound, intensity, acc_rad, acc_count, m
 
 
 @jit
-def _fate(b: float, leaf: bool, drop_empty: bool) -> int:
-    """1: stays live (bound > 0); 2: retired (bound 0: exact, a leaf, or an empty cluster
-    kept in the cut); 0: dropped (an empty cluster, with ``drop_empty``)."""
+def _fate(b: float, leaf: bool, empty: int) -> int:
+    """1: stays live (bound > 0); 2: retired (bound 0: exact, or a leaf); for an empty
+    cluster (bound 0, not a leaf) ``empty``: 2 (lightcut: exact), 0 (the stochastic cut:
+    dropped) or 3 (a shared stochastic cut: kept, outside the cut-size budget)."""
     if b > 0.0 or np.isnan(b):
         return 1
-    if drop_empty and not leaf:
-        return 0
+    if not leaf:
+        return empty
     return 2
 
 
 @jit
-def _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, drop_empty, node):
+def _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, empty, node):
     """Per slot of the merged list (unsplit entries then children, point by point): the
     source (≥ 0 an old slot, < 0 the child −1 − q) and its fate (:func:`_fate`)."""
     K, S = node.shape[0], sel.shape[0]
@@ -192,7 +193,7 @@ def _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, drop_empty,
         for k in range(s, s + c):
             if not picked[k]:
                 src[m], pt[m] = k, p
-                fate[m] = _fate(bound[k], is_leaf[node[k]], drop_empty)
+                fate[m] = _fate(bound[k], is_leaf[node[k]], empty)
                 m += 1
         j1 = j0
         while j1 < S and sel[j1] < s + c:
@@ -201,7 +202,7 @@ def _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, drop_empty,
             for j in range(j0, j1):
                 q = half * S + j
                 src[m], pt[m] = -1 - q, p
-                fate[m] = _fate(kid_bound[q], is_leaf[kid_node[q]], drop_empty)
+                fate[m] = _fate(kid_bound[q], is_leaf[kid_node[q]], empty)
                 m += 1
         j0 = j1
     return src[:m], fate[:m], pt[:m]
@@ -209,7 +210,7 @@ def _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, drop_empty,
 
 @jit
 def apply_round(start, count, node, unit, loss, bound, sel, kid_node, kid_unit, kid_loss,
-                kid_bound, is_leaf, drop_empty, intensity, acc_rad, acc_count):
+                kid_bound, is_leaf, empty, intensity, acc_rad, acc_count):
     """The next round's live entries and this round's retired ones (step 2).
 
     Args:
@@ -218,8 +219,9 @@ def apply_round(start, count, node, unit, loss, bound, sel, kid_node, kid_unit, 
         kid_node, kid_unit, kid_loss, kid_bound: (2S,) children, the ones sharing the
             parent's representative first, then the others, aligned with sel.
         is_leaf, intensity: (n_nodes,) and (n_nodes,3) of the tree.
-        drop_empty: drop empty clusters (bound 0, not leaves: the stochastic cut of one point)
-            instead of retiring them with the other bound-0 entries.
+        empty: what becomes of empty clusters (bound 0, not leaves), :func:`_fate`: 2
+            retired (lightcut), 0 dropped (stochastic cut), 3 retired without counting in
+            ``acc_count`` (a shared stochastic cut).
         acc_rad (P,3), acc_count (P,): updated in place with the retired entries
             (radiance Σ M_r G_r V_r I_C; the per-point sum starts at 0 as numpy's bincount).
 
@@ -228,11 +230,11 @@ def apply_round(start, count, node, unit, loss, bound, sel, kid_node, kid_unit, 
         (pt, node, unit, loss, bound) of the retired ones (grouped by point).
     """
     P = start.shape[0]
-    src, fate, pt = _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, drop_empty, node)
+    src, fate, pt = _sources(start, count, sel, bound, kid_node, kid_bound, is_leaf, empty, node)
     n_live = n_ret = 0
     for i in range(src.shape[0]):
         n_live += fate[i] == 1
-        n_ret += fate[i] == 2
+        n_ret += fate[i] >= 2
     n_count = np.zeros(P, np.int64)
     n_node, n_bound = np.empty(n_live, np.int64), np.empty(n_live)
     n_unit, n_loss = np.empty((n_live, 3)), np.empty((n_live, 3))
@@ -262,7 +264,7 @@ def apply_round(start, count, node, unit, loss, bound, sel, kid_node, kid_unit, 
                 runit[r, j] = unit[k, j] if k >= 0 else kid_unit[q, j]
                 rloss[r, j] = loss[k, j] if k >= 0 else kid_loss[q, j]
                 rad[p, j] += runit[r, j] * intensity[nd, j]
-            acc_count[p] += 1
+            acc_count[p] += f == 2
             r += 1
     n_start = np.zeros(P, np.int64)
     for p in range(1, P):

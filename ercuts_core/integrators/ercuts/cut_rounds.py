@@ -51,16 +51,17 @@ def run_rounds(tree: LightTree, n_pts: int, unit: NDArray, loss: NDArray, bound:
     """Refine the cuts of ``n_pts`` points that start at the root (its (P,3) ``unit`` and
     ``loss`` and (P,) ``bound``) in lock-step rounds until no point splits an entry or
     ``on_round()`` returns False (``mode``: ``refine.MODE_*``; ``keep_empty``: the stochastic
-    cut keeps its empty clusters, for a cut shared with other points)."""
-    drop_empty = mode == refine.MODE_STOCHASTIC and not keep_empty
+    cut keeps its empty clusters outside its size budget, for a cut shared with other points;
+    ``count`` then excludes them)."""
+    fate_empty = (3 if keep_empty else 0) if mode == refine.MODE_STOCHASTIC else 2
     acc_rad, acc_count = np.zeros((n_pts, 3)), np.zeros(n_pts, np.int64)
     ones = np.ones(n_pts, np.int64)
     live = (np.arange(n_pts, dtype=np.int64), ones, np.full(n_pts, tree.root, np.int64),
             np.ascontiguousarray(unit, np.float64), np.ascontiguousarray(loss, np.float64),
             np.ascontiguousarray(bound, np.float64))
-    empty = np.zeros(0, np.int64)
-    live, retired = _apply(tree, live, empty, (empty, np.zeros((0, 3)), np.zeros((0, 3)),
-                                               np.zeros(0)), drop_empty, acc_rad, acc_count)
+    none = np.zeros(0, np.int64)
+    live, retired = _apply(tree, live, none, (none, np.zeros((0, 3)), np.zeros((0, 3)),
+                                               np.zeros(0)), fate_empty, acc_rad, acc_count)
     kept = [retired]
     unmet = np.zeros(n_pts, bool)
     rounds = rays = 0
@@ -73,7 +74,7 @@ def run_rounds(tree: LightTree, n_pts: int, unit: NDArray, loss: NDArray, bound:
             break
         pt = np.repeat(np.arange(n_pts, dtype=np.int64), count)[sel]
         *kids, new_rays = children(pt, node[sel], u[sel], lo[sel])
-        live, retired = _apply(tree, live, sel, kids, drop_empty, acc_rad, acc_count)
+        live, retired = _apply(tree, live, sel, kids, fate_empty, acc_rad, acc_count)
         kept.append(retired)
         rays += new_rays
         rounds += 1
@@ -84,14 +85,14 @@ def run_rounds(tree: LightTree, n_pts: int, unit: NDArray, loss: NDArray, bound:
     return _finish(tree, n_pts, live, kept, acc_rad, acc_count, unmet, rounds, rays)
 
 
-def _apply(tree, live, sel, kids, drop_empty, acc_rad, acc_count):
+def _apply(tree, live, sel, kids, empty, acc_rad, acc_count):
     """:func:`~ercuts_core.kernels.refine.apply_round`: (live arrays, retired arrays)."""
     kid_node, kid_unit, kid_loss, kid_bound = kids
     out = refine.apply_round(*live, sel, np.asarray(kid_node, np.int64),
                              np.ascontiguousarray(kid_unit, np.float64),
                              np.ascontiguousarray(kid_loss, np.float64),
                              np.ascontiguousarray(kid_bound, np.float64), tree.is_leaf,
-                             drop_empty, tree.intensity, acc_rad, acc_count)
+                             empty, tree.intensity, acc_rad, acc_count)
     return out[:6], out[6:]
 
 

@@ -48,9 +48,10 @@ def stochastic_cut(tree: LightTree, pts: ShadingPoints, cut_size: int,
                    clamp: float = 0.0, keep_empty: bool = False) -> tuple[NDArray, NDArray]:
     """The cut of every point (step 1 of the module docstring): (C,) point indices and (C,)
     node ids, sorted by point, at most ``cut_size`` per point; nodes with a zero bound that
-    are not leaves are dropped (they carry no light to the point) unless ``keep_empty``
-    (the cut is a partition of all VPLs, for other points to share: they may see light
-    from those nodes).  Lock-step rounds over flat arrays, no shadow rays."""
+    are not leaves are dropped (they carry no light to the point), or with ``keep_empty``
+    kept outside the ``cut_size`` budget (the same refined nodes, plus those: a partition of
+    all VPLs, for other points to share, which may see light from them).  Lock-step rounds
+    over flat arrays, no shadow rays."""
     n_pts = pts.count
     pidx = np.arange(n_pts)
     root = np.full(n_pts, tree.root, np.int64)
@@ -64,8 +65,7 @@ def stochastic_cut(tree: LightTree, pts: ShadingPoints, cut_size: int,
         done = leaf | (e.bound <= 0.0)
         if np.any(done):
             final.append(e.take(np.flatnonzero(done if keep_empty else leaf)))
-            if not keep_empty:
-                count -= np.bincount(e.pt[done & ~leaf], minlength=n_pts)
+            count -= np.bincount(e.pt[done & ~leaf], minlength=n_pts)
             e = e.take(np.flatnonzero(~done))
         sel = _select(e, e.bound, np.zeros(e.pt.size), cut_size - count, _BAND)
         if sel.size == 0:

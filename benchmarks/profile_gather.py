@@ -198,6 +198,41 @@ def sharing_sweep(w: int, h: int, n_points: int, blocks: list[int], repeats: int
     return lines + [""]
 
 
+def cancel_latency(w: int, h: int, modes: list[str], after: float = 3.0) -> list[str]:
+    """Esc during the gather: the progress callback starts returning False ``after`` seconds
+    into a full-image, unpaced gather pass; measured: the largest gap between progress
+    calls before it, and the time from the first False to the gather's return."""
+    with open(state_path(w, h), "rb") as fh:
+        state = pickle.load(fh)
+    scene = BuiltScene(sanitize(scenes.s_corridor(w, h)).desc)
+    g = state["g"]
+    lines = [f"## Esc latency {w}×{h} ({time.strftime('%Y-%m-%d %H:%M')}, load "
+             f"{os.getloadavg()[0]:.1f}, backend {'numba' if kernels.enabled() else 'numpy'})", "",
+             "| gather | largest gap between progress calls s | Esc → return s |", "|---|---|---|"]
+    for mode in modes:
+        calls, t_cancel = [], []
+        t0 = time.perf_counter()
+
+        def progress(f, msg):
+            now = time.perf_counter()
+            calls.append(now)
+            if now - t0 > after:
+                t_cancel.append(now)
+                return False
+            return True
+
+        ga = gather_mod.Gather(scene, RenderSettings(gather=mode, seed=0), g, state["batch"])
+        sched = Schedule(Clock(0.0, progress, None), direct_vpls=False, paced=False)
+        ga.run(state["vpls"], state["tree"], state["gmax"], sched, {"P": state["P"]}, lambda *a: None)
+        t_end = time.perf_counter()
+        gaps = np.diff([t0] + calls)
+        lines.append(f"| {mode} | {gaps.max():.2f} | {t_end - t_cancel[0]:.2f} |" if t_cancel
+                     else f"| {mode} | {gaps.max():.2f} | (finished before {after} s) |")
+        print(lines[-1], flush=True)
+    scene.close()
+    return lines + [""]
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--capture", action="store_true")
@@ -209,6 +244,7 @@ def main(argv=None) -> None:
     ap.add_argument("--modes", nargs="+", default=["LIGHTCUTS", "STOCHASTIC"])
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--sharing", nargs="*", type=int, help="cut-sharing blocks to sweep, e.g. 1 2 4 8")
+    ap.add_argument("--cancel", action="store_true", help="Esc latency of every gather (--modes)")
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
     lines = []
@@ -218,6 +254,8 @@ def main(argv=None) -> None:
         lines += gather_profile(w, h, args.points, args.modes, args.repeats)
     if args.sharing:
         lines += sharing_sweep(w, h, args.points, args.sharing, args.repeats)
+    if args.cancel:
+        lines += cancel_latency(w, h, args.modes)
     print("\n".join(lines))
     os.makedirs(os.path.dirname(OUT), exist_ok=True)
     with open(OUT, "a") as fh:

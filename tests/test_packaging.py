@@ -186,9 +186,10 @@ local = os.path.join(bpy.utils.user_resource("EXTENSIONS"), ".local")
 site = [p for p in sys.path if p.startswith(local)]
 assert len(site) == 1, sys.path
 sys.path.insert(0, site[0])
-for name in ("embreex", "scipy", "OpenEXR", "numba", "llvmlite", "ercuts_core"):
-    for loaded in [m for m in sys.modules if m == name or m.startswith(name + ".")]:
-        sys.modules.pop(loaded)
+names = ("embreex", "scipy", "OpenEXR", "numba", "llvmlite", "ercuts_core")
+for loaded in [m for m in sys.modules if m.split(".")[0] in names]:
+    sys.modules.pop(loaded)       # all first: numba must not keep another llvmlite
+for name in names:
     module = __import__(name)
     assert module.__file__.startswith(site[0]), module.__file__
 from ercuts_core import kernels

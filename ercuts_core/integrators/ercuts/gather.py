@@ -120,25 +120,27 @@ class Gather:
                 show(L, done_pt.reshape(-1, S).all(axis=1))
         stats["gather_passes"] = passes
         sweep.record(stats, done, cut)
-        glossy = self._glossy()
+        glossy = self._glossy(done_pt & g.valid)
         return Gathered(parts=per_pixel_parts(L, S),
                         glossy=per_pixel(L.sum(axis=0) * glossy[:, None], window.n_pixels, S),
                         cut=per_pixel(cut[:, None], window.n_pixels, S),
                         complete=done_pt.reshape(-1, S).all(axis=1))
 
-    def _glossy(self) -> NDArray:
-        """(Q,) shading points with a specular lobe of roughness < :data:`GLOSSY_ROUGHNESS`."""
+    def _glossy(self, gathered: NDArray) -> NDArray:
+        """(Q,) shading points with a specular lobe of roughness < :data:`GLOSSY_ROUGHNESS`,
+        among the ``gathered`` ones (after a cancel, only those: no whole-image pass then)."""
         g, scene = self.g, self.scene
-        h = np.flatnonzero(g.valid)
+        h = np.flatnonzero(gathered)
         out = np.zeros(len(g.pixel), bool)
         if len(h):
             bsdf = scene.bsdf(g.mat[h], g.ns[h], g.ng[h], g.p[h])
             out[h] = ~bsdf.is_diffuse & (scene.roughness(g.mat[h], g.p[h]) < GLOSSY_ROUGHNESS)
         return out
 
-    def _shading_points(self, idx: NDArray, f_bound: NDArray) -> ShadingPoints:
+    def _shading_points(self, idx: NDArray) -> ShadingPoints:
         """The lightcut shading points of G-buffer entries ``idx`` (BSDF and visibility
-        callbacks; ``f_bound`` (Q,) the materials' bound, used at diffuse points; glossy
+        callbacks; the materials' bound ``bsdf_max_value``, used at diffuse points, computed
+        per batch so that no whole-image pass delays the first progress report; glossy
         points get :class:`.lightcuts.GlossyReceivers`)."""
         scene, g = self.scene, self.g
         bsdf = scene.bsdf(g.mat[idx], g.ns[idx], g.ng[idx], g.p[idx])
@@ -154,7 +156,8 @@ class Gather:
         # Glossy points: per-cluster GGX bound (f_bound is no bound for a glossy lobe)
         glossy = (GlossyReceivers.from_bsdf(bsdf, wo, g.ns[idx])
                   if GLOSSY_CLUSTER_BOUND and not bsdf.all_diffuse else None)
-        return ShadingPoints(p, g.ns[idx], wo, f_bound[idx], eval_f, visible, glossy=glossy)
+        f_bound = scene.bsdf_max_value(g.mat[idx], p)
+        return ShadingPoints(p, g.ns[idx], wo, f_bound, eval_f, visible, glossy=glossy)
 
 
 class _Sweep:
@@ -170,7 +173,6 @@ class _Sweep:
         # of the mean pixel luminance, Weber's law no longer applies (dark pixels would refine
         # to max_cut_size for errors nobody can see).
         self.floor = s.max_error * ABS_FLOOR * stats.get("P", 0.0) / max(window.n_pixels, 1)
-        self.f_bound = scene.bsdf_max_value(gather.g.mat, gather.g.p)
         self.clamp = 0.0 if not np.isfinite(gmax) else gmax
         self.share = emitter_share(tree, vpls) if tree is not None else None
         self.cdf = leaf_cdf(tree) if tree is not None and s.gather == "STOCHASTIC" else None
@@ -222,7 +224,7 @@ class _Sweep:
         """Gather the points ``idx`` into ``L`` and ``cut``; False when a cancel abandoned
         the batch (brute force only: the cuts of a cancelled lightcut batch stay complete)."""
         s, vpls, tree, pace = self.gather.settings, self.vpls, self.tree, self.pace
-        pts = self.gather._shading_points(idx, self.f_bound)
+        pts = self.gather._shading_points(idx)
         if s.gather == "BRUTE_FORCE":
             for part, sel in enumerate((vpls.emitter, ~vpls.emitter)):
                 if sel.any():

@@ -147,7 +147,8 @@ def gather_profile(w: int, h: int, n_points: int, modes: list[str], repeats: int
             best = min(times[b])
             lines.append(f"- {mode} [{b}]: best {best:.2f} s of {[round(t, 2) for t in times[b]]} → "
                          f"{1e6 * best / len(pts):.0f} µs/point, cut mean {cut[pts].mean():.1f}, "
-                         f"{rays / len(pts):.1f} shadow rays/point, {rays / best / 1e6:.2f} Mrays/s end to end")
+                         f"{rays / len(pts):.1f} shadow rays/point, "
+                         f"{rays / best / 1e6:.2f} Mrays/s end to end")
         if len(backends) == 2:
             a, b = results["numba"][0], results["numpy"][0]
             rel = np.abs(a - b).max() / max(np.abs(b).max(), 1e-300)

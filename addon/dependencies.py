@@ -4,7 +4,7 @@ how to install the missing ones.
 Where each runtime gets them (shared docs ``blender.md`` §4.3):
 
 * **Blender ≥ 4.2, extension zip**: the wheels listed in ``blender_manifest.toml``
-  (``ercuts_core``, embreex, scipy, OpenEXR), which Blender installs into its extensions'
+  (``ercuts_core``, embreex, scipy, OpenEXR, numba + llvmlite), which Blender installs into its extensions'
   shared site-packages; numpy ships with Blender.
 * **Blender 3.x, legacy zip**: ``ercuts_core`` is vendored in ``<package>/vendor`` (see
   :func:`use_vendored_core`); numpy, embreex, scipy and OpenEXR come from Blender's Python,
@@ -23,7 +23,7 @@ import sys
 from dataclasses import dataclass
 
 #: Modules the renderer imports, in the order they are reported.
-MODULES = ("numpy", "embreex", "scipy", "OpenEXR", "ercuts_core")
+MODULES = ("numpy", "embreex", "scipy", "OpenEXR", "numba", "ercuts_core")
 
 #: pip requirement per module, for a Blender whose Python lacks it (Python 3.10/3.11; numpy < 2
 #: like bpy 5.0.1; scipy < 1.14 still supports the older numpy of Blender 3.x builds).
@@ -32,6 +32,8 @@ REQUIREMENTS = {
     "embreex": "embreex==4.4.0.post1",
     "scipy": "scipy>=1.11,<1.14",
     "OpenEXR": "OpenEXR>=3.2,<4",
+    # optional: the gather's compiled kernels (the core falls back to numpy and warns)
+    "numba": "numba==0.68.1 llvmlite==0.50.0",
 }
 
 #: Distribution names where they differ from the module name (for the version lookup).
@@ -135,7 +137,7 @@ def install_command(names, target: str, python: str | None = None) -> list[str]:
     Python even when ``python`` is another interpreter; ``--no-deps`` keeps Blender's numpy
     (numpy is installed only when it is itself missing).
     """
-    reqs = [REQUIREMENTS[n] for n in names if n in REQUIREMENTS]
+    reqs = [req for n in names if n in REQUIREMENTS for req in REQUIREMENTS[n].split()]
     version = f"{sys.version_info.major}.{sys.version_info.minor}"
     return [python or sys.executable, "-m", "pip", "install", "--target", target, "--upgrade",
             "--no-deps", "--only-binary=:all:", "--python-version", version, *reqs]

@@ -229,6 +229,13 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
                      "each), averaged"),
         default=_default("stochastic_passes", 8), min=1, soft_max=256,
     )
+    stochastic_cut_sharing: IntProperty(
+        name="Cut Sharing",
+        description=("Neighbouring shading points (in a pixel row) that share one Stochastic "
+                     "Lightcuts cut, refined once for them (1 = off); points across an edge keep "
+                     "their own. Each point still draws its own lights (unbiased)"),
+        default=_default("stochastic_cut_sharing", 1), min=1, soft_max=16,
+    )
     clamp: FloatProperty(
         name="VPL Clamp",
         description=("Virtual point light clamp: minimum distance as a fraction of the scene's "

@@ -59,6 +59,8 @@ PHASE_OF_FUNCTION = {
     "_rough_bdpt": "bdpt", "_direct_light": "direct", "build_gbuffer": "seeds",
     "_direct_image": "seeds", "_seeds": "seeds", "run_chains": "chains", "make_vpls": "vpls", "_gather": "cuts",
 }
+#: Run labels of the numpy-vs-numba gather comparison (issue 17).
+GATHER_LABELS = ("gather_numpy", "gather_numba")
 ERCUTS_PHASES = ("bdpt", "direct", "seeds", "chains", "vpls", "tree", "cuts")
 #: Hot spots removed (one commit each; before/after measured interleaved as CPU seconds,
 #: best of 3, on the shared 2-core machine; results bit-identical unless stated).
@@ -270,7 +272,7 @@ def write_report(data: dict) -> None:
              "`Tracer.intersect/occluded` (embreex + float32 conversion + decoding). "
              "160×120; PATH and BDPT at 4 spp; ERCUTS with default settings. "
              "Machine: 2 cores, shared with other jobs — compare shares more than seconds.", ""]
-    runs = [(lab, data[lab]) for lab in ("before", "after") if lab in data]
+    runs = [(lab, data[lab]) for lab in ("before", "after", *GATHER_LABELS) if lab in data]
     for lab, run in runs:
         lines += [f"## {lab} ({run['meta']['date']}, commit {run['meta']['commit']})", "",
                   "| scene | integrator | phase | wall s | rays M | end-to-end Mrays/s "
@@ -286,16 +288,18 @@ def write_report(data: dict) -> None:
                     f"| {_fmt(100 * r['embreex_share'], '.0f')} % "
                     f"| {_fmt(100 * r['tracer_call_share'], '.0f')} % |")
         lines.append("")
-    if len(runs) == 2:
-        lines += ["## Before → after (end-to-end Mrays/s, embreex share)", "",
+    pairs = [p for p in (("before", "after"), GATHER_LABELS) if p[0] in data and p[1] in data]
+    for lab_a, lab_b in pairs:
+        runs_ab = [(lab_a, data[lab_a]), (lab_b, data[lab_b])]
+        lines += [f"## {lab_a} → {lab_b} (end-to-end Mrays/s, embreex share)", "",
                   "*Load-normalised speed-up* = after/before embreex share: embreex alone is replayed "
                   "right after each render, so on a loaded machine it slows down with the render and "
                   "the ratio of shares is a fairer speed-up than the ratio of wall times. Ray counts "
                   "can differ between runs (other changes to batch sizes change the random streams).", "",
                   "| scene | integrator | phase | before | after | wall speed-up | load-normalised speed-up |",
                   "|---|---|---|---|---|---|---|"]
-        before = {(c["scene"], c["integrator"]): c for c in runs[0][1]["cases"]}
-        for case in runs[1][1]["cases"]:
+        before = {(c["scene"], c["integrator"]): c for c in runs_ab[0][1]["cases"]}
+        for case in runs_ab[1][1]["cases"]:
             b = before.get((case["scene"], case["integrator"]))
             if b is None:
                 continue
@@ -340,7 +344,9 @@ def _commit() -> str:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--label", choices=("before", "after"), default="after")
+    ap.add_argument("--label", choices=("before", "after", *GATHER_LABELS), default="after",
+                    help=f"{GATHER_LABELS}: the gather's numpy code (run with ERCUTS_KERNELS=numpy) "
+                         "and its numba kernels, compared with each other")
     ap.add_argument("--quick", action="store_true", help="Cornell box only")
     ap.add_argument("--no-profile", action="store_true")
     ap.add_argument("--only", default="", help="comma-separated integrators to run")

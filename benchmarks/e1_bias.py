@@ -41,7 +41,6 @@ from ercuts_core.integrators.ercuts.gather import Gather  # noqa: E402
 from ercuts_core.integrators.ercuts.lightcuts import evaluate_lights  # noqa: E402
 from ercuts_core.integrators.ercuts.vpl import (build_gbuffer, estimate_e1,  # noqa: E402
                                                  estimate_e1_light_tracing)
-from ercuts_core.bsdf import bsdf_max_value  # noqa: E402
 from ercuts_core.sampling import luminance  # noqa: E402
 from ercuts_core.scenes import closed_room, cornell_box, door_ajar, s_corridor  # noqa: E402
 
@@ -93,7 +92,7 @@ def gather_energy(scene, settings, g, pos, normal, color, gmax, block=1 << 20, p
     ``per_sample``, (S, V): the energy of each of the S one-point-per-pixel G-buffers."""
     gat = Gather(scene, settings, g, 1 << 30)
     pts_idx = np.flatnonzero(g.valid)
-    pts = gat._shading_points(pts_idx, bsdf_max_value(scene.materials, g.mat))
+    pts = gat._shading_points(pts_idx)
     clamp = 0.0 if not np.isfinite(gmax) else gmax
     V, Q = len(pos), len(pts_idx)
     out = np.zeros((g.samples, V))

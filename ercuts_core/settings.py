@@ -85,6 +85,11 @@ class RenderSettings:
             draws), averaged: its per-pixel noise falls with them while the VPL set is shared;
             under a time limit fewer when the iteration's time runs out, and the last
             iteration fills the time left with more.
+        stochastic_cut_sharing: shading points (neighbours in a pixel row) that share one
+            stochastic cut, refined at the first of them (1 = every point its own cut); a
+            point whose normal, plane or material differs keeps its own (edges). Each point
+            still draws its own VPLs, so the estimate stays unbiased (module
+            :mod:`~ercuts_core.integrators.ercuts.stochastic_lightcuts`).
         gather: 'STOCHASTIC' (default; stochastic lightcuts, Yuksel 2019: a cut of
             ``stochastic_cut_size`` nodes, each evaluated with one VPL drawn per shading point;
             unbiased for the VPLs, no error bound — its error is noise that the passes and
@@ -145,6 +150,7 @@ class RenderSettings:
     max_cut_size: int = 1000
     stochastic_cut_size: int = 32
     stochastic_passes: int = 8
+    stochastic_cut_sharing: int = 1
     clamp: float = 0.02
     gather: str = "STOCHASTIC"
     lightcut_error: str = "TOTAL"
@@ -186,10 +192,10 @@ class RenderSettings:
             raise ValueError(f"iterations must be >= 0 (0 = until the time limit), got {self.iterations}")
         if self.chains_per_pixel <= 0 or self.chain_length < 1 or self.max_chains < 1:
             raise ValueError("chains_per_pixel and max_chains must be > 0 and chain_length >= 1")
-        if min(self.max_cut_size, self.stochastic_cut_size, self.stochastic_passes, self.shading_samples,
-               self.e1_samples, self.direct_samples) < 1:
-            raise ValueError("max_cut_size, stochastic_cut_size, stochastic_passes, shading_samples, e1_samples "
-                             "and direct_samples must be >= 1")
+        if min(self.max_cut_size, self.stochastic_cut_size, self.stochastic_passes, self.stochastic_cut_sharing,
+               self.shading_samples, self.e1_samples, self.direct_samples) < 1:
+            raise ValueError("max_cut_size, stochastic_cut_size, stochastic_passes, stochastic_cut_sharing, "
+                             "shading_samples, e1_samples and direct_samples must be >= 1")
         if self.clamp < 0:
             raise ValueError(f"clamp must be >= 0, got {self.clamp}")
         if self.memory_budget_mb < 0:

@@ -7,13 +7,13 @@ Writes to ``dist/`` (shared docs ``blender.md`` §4):
 
 * ``ercuts-<version>-<platform>.zip`` (``linux_x64``, ``windows_x64``): the extension for
   Blender ≥ 4.2 — the add-on, ``blender_manifest.toml`` and ``wheels/``: the pure-Python core
-  (``ercuts_core``, built from ``pyproject.toml``) and embreex, scipy and OpenEXR for
+  (``ercuts_core``, built from ``pyproject.toml``) and embreex, scipy, OpenEXR, numba and llvmlite for
   CPython 3.11 (Blender 4.2–5.0) and 3.13 (Blender 5.1+), unmodified from PyPI. numpy is not
   bundled: Blender ships it. Built and then validated by Blender's own extension tool
   (``bl_pkg/cli/blender_ext.py`` from the bpy wheel, or ``--blender-ext``).
 * ``ercuts-<version>-legacy.zip``: the same add-on as a legacy add-on (``bl_info``) for
   Blender 3.x, one top-level folder ``ercuts/`` with the core vendored in ``ercuts/vendor/``;
-  numpy, embreex, scipy and OpenEXR come from Blender's Python (see the README).
+  numpy, embreex, scipy, OpenEXR and numba come from Blender's Python (see the README).
 
 Wheels are cached in ``build/wheels/`` (an offline rebuild reuses them); staging happens in
 ``build/addon/``. The versions in ``bl_info``, the manifest and ``pyproject.toml`` must agree.
@@ -42,8 +42,10 @@ PLATFORM_TAGS = {
 }
 #: CPython versions of Blender: 3.11 in Blender 4.2-5.0, 3.13 from Blender 5.1.
 PYTHONS = ("3.11", "3.13")
-#: Bundled third-party wheels (pins from requirements.txt); numpy ships with Blender.
-BUNDLED = ("embreex", "scipy", "OpenEXR")
+#: Bundled third-party wheels (pins from requirements.txt); numpy ships with Blender. numba and
+#: llvmlite (≈ 4 + 60 MB per Python and platform) run the gather's compiled kernels
+#: (``ercuts_core.kernels``; without them the core falls back to numpy and warns).
+BUNDLED = ("embreex", "scipy", "OpenEXR", "numba", "llvmlite")
 #: Pins that differ per Python (requirements.txt's scipy 1.13.1 has no CPython 3.13 wheel).
 PYTHON_PINS = {"3.13": {"scipy": "scipy==1.14.1"}}
 #: Files never packaged.

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from ercuts_core import RenderSettings
-from ercuts_core.bsdf import bsdf_max_value
 from ercuts_core.integrators.ercuts.gather import Gather
 from ercuts_core.integrators.ercuts.lightcuts import evaluate_lights
 from ercuts_core.integrators.ercuts.vpl import (build_gbuffer, estimate_e1_allocated,
@@ -44,7 +43,7 @@ def gather_energy(scene, g, pos, normal, color, gmax) -> np.ndarray:
     shadow rays); the mean over S is the pixel-value sum of the VPL's image."""
     gat = Gather(scene, RenderSettings(), g, 1 << 30)
     idx = np.flatnonzero(g.valid)
-    pts = gat._shading_points(idx, bsdf_max_value(scene.materials, g.mat))
+    pts = gat._shading_points(idx)
     V, Q = len(pos), len(idx)
     pidx, vidx = np.tile(np.arange(Q), V), np.repeat(np.arange(V), Q)
     unit, _, _ = evaluate_lights(pts, pidx, vidx, pos, normal, gmax)

@@ -1,6 +1,6 @@
 """The packages users install, built by ``scripts/build_addon.py`` (shared docs ``blender.md`` §4):
 the extension zip (Blender ≥ 4.2) builds, passes Blender's own validator and holds the manifest,
-the add-on, the core wheel and the embreex/scipy/OpenEXR wheels (no numpy); the legacy zip
+the add-on, the core wheel and the embreex/scipy/OpenEXR/numba/llvmlite wheels (no numpy); the legacy zip
 (Blender 3.x) is one ``ercuts/`` folder with the core vendored, importable without the
 repository; the add-on uses relative imports only. The extension is also installed with bpy
 5.0.1's extension operator and renders from its own wheels.
@@ -78,7 +78,7 @@ def test_extension_zip_contents(dist):
     assert set(m["permissions"]) == {"files"}  # the statistics sidecar writes next to frames
     wheels = [w.removeprefix("./") for w in m["wheels"]]
     assert set(wheels) == {n for n in names if n.endswith(".whl")}  # listed == shipped
-    for prefix in ("ercuts_core-", "embreex-", "scipy-", "openexr-"):
+    for prefix in ("ercuts_core-", "embreex-", "scipy-", "openexr-", "numba-", "llvmlite-"):
         (wheel,) = [w for w in wheels if w.startswith("wheels/" + prefix)]
         assert prefix == "ercuts_core-" or "-cp311-cp311-" in wheel, wheel
         assert prefix == "ercuts_core-" or "linux" in wheel, wheel
@@ -169,8 +169,9 @@ def test_addon_imports_are_relative():
 def test_extension_installs_and_renders_in_bpy(dist, tmp_path):
     """bpy 5.0.1's own extension installer (``extensions.package_install_files``) installs the zip
     into a temporary user folder and enables it; with the extension's site-packages first on
-    ``sys.path`` the core, embreex, scipy and OpenEXR come from its wheels, and a small render
-    of the Cornell box through the installed engine writes a finite, non-black EXR."""
+    ``sys.path`` the core, embreex, scipy, OpenEXR and numba come from its wheels (the compiled
+    kernels load), and a small ERCUTS render of the Cornell box through the installed engine
+    (the gather's numba kernels next to embreex) writes a finite, non-black EXR."""
     if importlib.util.find_spec("bpy") is None:
         pytest.skip("bpy module not installed")
     out = tmp_path / "out.exr"
@@ -185,16 +186,20 @@ local = os.path.join(bpy.utils.user_resource("EXTENSIONS"), ".local")
 site = [p for p in sys.path if p.startswith(local)]
 assert len(site) == 1, sys.path
 sys.path.insert(0, site[0])
-for name in ("embreex", "scipy", "OpenEXR", "ercuts_core"):
-    sys.modules.pop(name, None)
+names = ("embreex", "scipy", "OpenEXR", "numba", "llvmlite", "ercuts_core")
+for loaded in [m for m in sys.modules if m.split(".")[0] in names]:
+    sys.modules.pop(loaded)       # all first: numba must not keep another llvmlite
+for name in names:
     module = __import__(name)
     assert module.__file__.startswith(site[0]), module.__file__
+from ercuts_core import kernels
+assert kernels.NUMBA and kernels.enabled(), kernels.WHY_NOT
 prefs = bpy.context.preferences.addons["bl_ext.user_default.ercuts"].preferences
 assert prefs.default_threads == 0
 bpy.ops.wm.open_mainfile(filepath={os.path.join(ROOT, "blend_scenes", "cornell_box.blend")!r})
 s = bpy.context.scene
 s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 40, 30, 100
-s.ercuts.integrator, s.ercuts.samples = "PATH", 4
+s.ercuts.integrator, s.ercuts.samples, s.ercuts.time_limit = "ERCUTS", 4, 20
 s.render.filepath = {str(out)!r}
 s.render.image_settings.file_format = "OPEN_EXR"
 assert bpy.ops.render.render(write_still=True) == {{"FINISHED"}}

@@ -7,7 +7,7 @@ import pytest
 
 from ercuts_core.integrators.ercuts.light_tree import build_light_tree
 from ercuts_core.integrators.ercuts.lightcuts import brute_force, cluster_bound, evaluate_lights
-from ercuts_core.integrators.ercuts.stochastic_lightcuts import (leaf_cdf, sample_leaves,
+from ercuts_core.integrators.ercuts.stochastic_lightcuts import (leaf_cdf, sample_leaves, shared_cut,
                                                                  stochastic_cut,
                                                                  stochastic_lightcut)
 from ercuts_core.sampling import luminance
@@ -103,3 +103,105 @@ def test_same_generator_state_same_image_and_empty_inputs() -> None:
     assert a.shadow_rays <= 16 * pts.count and not a.unmet.any()
     with pytest.raises(ValueError):
         stochastic_lightcut(tree, *lights, pts, np.random.default_rng(3), cut_size=0)
+
+
+def _block_refs(n: int, block: int) -> np.ndarray:
+    j = np.arange(n)
+    return j - j % block
+
+
+@pytest.mark.parametrize("backend", ["numba", "numpy"])
+def test_a_shared_cut_partitions_every_vpl_at_every_sharing_point(backend: str) -> None:
+    """Cut sharing (``stochastic_cut_sharing``): each point uses its block head's cut with the
+    empty clusters kept, so Σ over the cut of each node's exact light = the exact sum at every
+    point of the block, not only at the head (the estimator's expectation, by enumeration)."""
+    from ercuts_core import kernels
+    lights, pts = random_vpls(3000, 19), diffuse_points(200, 19, occluder=True)
+    tree = build_light_tree(*lights, seed=0)
+    contrib = per_light_luminance(lights, pts)
+    ref = _block_refs(pts.count, 4)
+    with kernels.backend(backend):
+        pt, node = shared_cut(tree, pts, ref, 16)
+    got = np.bincount(pt, cluster_truth(tree, contrib, pt, node), pts.count)
+    np.testing.assert_allclose(got, contrib.sum(axis=1), rtol=1e-9, atol=1e-12)
+    assert np.all(np.diff(pt) >= 0)
+    # the members of a block hold their head's nodes
+    for p in (1, 2, 3, 41):
+        assert np.array_equal(node[pt == p], node[pt == ref[p]])
+    # the head's refined nodes are its own cut's; the kept empty clusters come on top
+    with kernels.backend(backend):
+        own_pt, own_node = stochastic_cut(tree, pts, 16)
+    for p in np.unique(ref)[:20]:
+        assert set(own_node[own_pt == p]) <= set(node[pt == p])
+
+
+def test_dropping_empty_clusters_of_a_shared_cut_is_detected() -> None:
+    """The partition check can fail: the head's own cut (empty clusters dropped) used at the
+    other points of its block misses light that reaches them."""
+    lights, pts = random_vpls(3000, 19), diffuse_points(200, 19, occluder=True)
+    tree = build_light_tree(*lights, seed=0)
+    contrib = per_light_luminance(lights, pts)
+    ref = _block_refs(pts.count, 4)
+    hpt, hnode = stochastic_cut(tree, pts, 16)               # every point's own cut
+    keep = np.isin(hpt, np.unique(ref))
+    hpt, hnode = hpt[keep], hnode[keep]
+    c = np.bincount(hpt, minlength=pts.count)[ref]
+    pt = np.repeat(np.arange(pts.count), c)
+    starts = (np.cumsum(np.bincount(hpt, minlength=pts.count)) - np.bincount(hpt, minlength=pts.count))[ref]
+    node = hnode[np.repeat(starts, c) + np.arange(pt.size) - np.repeat(np.cumsum(c) - c, c)]
+    got = np.bincount(pt, cluster_truth(tree, contrib, pt, node), pts.count)
+    assert np.any(np.abs(got - contrib.sum(axis=1)) > 1e-6 * contrib.sum(axis=1).max())
+
+
+def test_shared_cut_estimate_averages_to_the_exact_sum() -> None:
+    """With cuts shared over blocks of 4, the mean of 300 estimates is still within 4.5
+    standard errors of the brute-force sum at every point."""
+    lights, pts = room_scene(5000, 60, 3)
+    tree = build_light_tree(*lights, seed=0)
+    exact = luminance(brute_force(*lights, pts))
+    rng = np.random.default_rng(12)
+    ref = _block_refs(pts.count, 4)
+    runs = np.array([luminance(stochastic_lightcut(tree, *lights, pts, rng, cut_size=8, ref=ref).radiance)
+                     for _ in range(300)])
+    mean, se = runs.mean(axis=0), runs.std(axis=0, ddof=1) / np.sqrt(len(runs))
+    assert np.all(np.abs(mean - exact) <= 4.5 * se + 1e-9 * exact)
+
+
+def test_share_refs_keep_edges_apart() -> None:
+    """Blocks of 4 consecutive points share the head's cut on one plane; a point across a
+    crease (another normal), off the head's plane, in another row or of another material
+    uses its own."""
+    from types import SimpleNamespace
+
+    from ercuts_core.integrators.ercuts.gather import share_refs
+    n = 16
+    p = np.column_stack([np.arange(n) * 0.01, np.zeros(n), np.ones(n)])
+    ns = np.tile([0.0, 0.0, 1.0], (n, 1))
+    mat = np.zeros(n, np.int64)
+    pixel = np.arange(n)
+    ns[5] = [0.0, 0.6, 0.8]                  # crease: cos 0.8 to the head's normal
+    p[6, 2] += 0.01                          # 1 cm off the head's plane at 2 cm distance
+    mat[9] = 1                               # another material
+    g = SimpleNamespace(p=p, ns=ns, mat=mat, pixel=pixel)
+    ref = share_refs(g, np.arange(n), 4, width=14)   # pixels 14, 15: the next row
+    expect = np.array([0, 0, 0, 0, 4, 5, 6, 4, 8, 9, 8, 8, 12, 12, 14, 15])
+    assert np.array_equal(ref, expect)
+
+
+def test_cut_sharing_in_a_render_is_unbiased_and_shares() -> None:
+    """``stochastic_cut_sharing = 4`` through ``render``: most points share a cut
+    (``shared_cut_fraction``), and the gathered light per pixel differs from the unshared
+    render (same VPLs: same seed) by noise only — the mean difference over the pixels is
+    within 4.5 standard errors of 0."""
+    from ercuts_core import RenderSettings, render, scenes
+    desc = scenes.cornell_box(48, 36)
+    out = {}
+    for k in (1, 4):
+        res = render(desc, RenderSettings(gather="STOCHASTIC", stochastic_cut_sharing=k, seed=3,
+                                          samples=4, direct_samples=4))
+        out[k] = (luminance(res.aovs["indirect"].reshape(-1, 3)), res.stats)
+    # 48-pixel rows, corners and the boxes break many blocks: about half the points share
+    assert 0.3 < out[4][1]["shared_cut_fraction"] < 0.75 and "shared_cut_fraction" not in out[1][1]
+    d = out[4][0] - out[1][0]
+    assert np.abs(d.mean()) <= 4.5 * d.std(ddof=1) / np.sqrt(d.size)
+    assert d.std() > 0                                   # really other draws

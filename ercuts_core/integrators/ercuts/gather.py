@@ -19,7 +19,7 @@ from ...scene import BuiltScene
 from ...settings import RenderSettings
 from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
 from .pacing import GatherPace, Schedule
-from .stochastic_lightcuts import stochastic_lightcut
+from .stochastic_lightcuts import leaf_cdf, stochastic_lightcut
 from .vpl import GBuffer
 
 #: Absolute lightcut error floor as a fraction of max_error × the mean pixel luminance.
@@ -39,6 +39,12 @@ PASS_SALT = 0x5C7
 PASS_START = 0.1
 #: Consecutive shading points kept together in the shuffled gather order (coherent rays).
 GATHER_RUN = 32
+#: Cut sharing (``stochastic_cut_sharing``): a point shares its block's cut when its shading
+#: normal is within this cosine of the block head's, it lies within SHARE_PLANE·distance of
+#: the head's tangent plane, in the same pixel row, with the same material (else: an edge,
+#: its own cut).
+SHARE_COS = 0.95
+SHARE_PLANE = 0.05
 #: Glossy shading points get the per-cluster GGX material bound (:class:`.lightcuts.
 #: GlossyReceivers`); False falls back to the constant lobe-peak bound of ``bsdf_max_value``,
 #: which glossy lobes exceed (kept for benchmarks/bench_glossy_bound.py's comparison only).
@@ -107,7 +113,7 @@ class Gather:
             L, passes = self._more_passes(sweep, L, time.perf_counter() - t0, schedule, show, done_pt)
         stats["gather_passes"] = passes
         sweep.record(stats, done, cut)
-        glossy = self._glossy()
+        glossy = self._glossy(done_pt & g.valid)
         return Gathered(parts=per_pixel_parts(L, S),
                         glossy=per_pixel(L.sum(axis=0) * glossy[:, None], window.n_pixels, S),
                         cut=per_pixel(cut[:, None], window.n_pixels, S),
@@ -136,19 +142,21 @@ class Gather:
                 break
         return total / count[None, :, None], passes
 
-    def _glossy(self) -> NDArray:
-        """(Q,) shading points with a specular lobe of roughness < :data:`GLOSSY_ROUGHNESS`."""
+    def _glossy(self, gathered: NDArray) -> NDArray:
+        """(Q,) shading points with a specular lobe of roughness < :data:`GLOSSY_ROUGHNESS`,
+        among the ``gathered`` ones (after a cancel, only those: no whole-image pass then)."""
         g, scene = self.g, self.scene
-        h = np.flatnonzero(g.valid)
+        h = np.flatnonzero(gathered)
         out = np.zeros(len(g.pixel), bool)
         if len(h):
             bsdf = scene.bsdf(g.mat[h], g.ns[h], g.ng[h], g.p[h])
             out[h] = ~bsdf.is_diffuse & (scene.roughness(g.mat[h], g.p[h]) < GLOSSY_ROUGHNESS)
         return out
 
-    def _shading_points(self, idx: NDArray, f_bound: NDArray) -> ShadingPoints:
+    def _shading_points(self, idx: NDArray) -> ShadingPoints:
         """The lightcut shading points of G-buffer entries ``idx`` (BSDF and visibility
-        callbacks; ``f_bound`` (Q,) the materials' bound, used at diffuse points; glossy
+        callbacks; the materials' bound ``bsdf_max_value``, used at diffuse points, computed
+        per batch so that no whole-image pass delays the first progress report; glossy
         points get :class:`.lightcuts.GlossyReceivers`)."""
         scene, g = self.scene, self.g
         bsdf = scene.bsdf(g.mat[idx], g.ns[idx], g.ng[idx], g.p[idx])
@@ -164,7 +172,8 @@ class Gather:
         # Glossy points: per-cluster GGX bound (f_bound is no bound for a glossy lobe)
         glossy = (GlossyReceivers.from_bsdf(bsdf, wo, g.ns[idx])
                   if GLOSSY_CLUSTER_BOUND and not bsdf.all_diffuse else None)
-        return ShadingPoints(p, g.ns[idx], wo, f_bound[idx], eval_f, visible, glossy=glossy)
+        f_bound = scene.bsdf_max_value(g.mat[idx], p)
+        return ShadingPoints(p, g.ns[idx], wo, f_bound, eval_f, visible, glossy=glossy)
 
 
 class _Sweep:
@@ -180,10 +189,10 @@ class _Sweep:
         # of the mean pixel luminance, Weber's law no longer applies (dark pixels would refine
         # to max_cut_size for errors nobody can see).
         self.floor = s.max_error * ABS_FLOOR * stats.get("P", 0.0) / max(window.n_pixels, 1)
-        self.f_bound = scene.bsdf_max_value(gather.g.mat, gather.g.p)
         self.clamp = 0.0 if not np.isfinite(gmax) else gmax
         self.share = emitter_share(tree, vpls) if tree is not None else None
-        self.rays, self.clamped, self.unmet = 0, 0.0, 0
+        self.cdf = leaf_cdf(tree) if tree is not None and s.gather == "STOCHASTIC" else None
+        self.rays, self.clamped, self.unmet, self.shared = 0, 0.0, 0, 0
         self.stats = stats
         self.pace = GatherPace(s.max_error, s.max_cut_size)
         self.pass_index = 0
@@ -210,44 +219,56 @@ class _Sweep:
         L = np.zeros((2, Q, 3))              # [from emitter VPLs, from the others]
         cut = np.zeros(Q)
         done_pt = ~g.valid                   # misses need no gather
-        done, pace = 0, self.pace
+        done, pace, stopped = 0, self.pace, False
         # A small first batch calibrates the cost per point before the cap is fitted.
         step = min(ga.gather_batch, PROGRESS_GATHER_POINTS)
         edges = np.unique(np.r_[0, np.arange(min(256, len(pts_all)), len(pts_all), step), len(pts_all)])
         for start, stop in zip(edges[:-1], edges[1:]):
             idx = pts_all[start:stop]
             t_batch = time.perf_counter()
-            self._batch(idx, start, pass_index, L, cut)
+            if not self._batch(idx, start, pass_index, L, cut):
+                stopped = True                  # brute force: the batch was abandoned
+                break
             done = start + len(idx)
             done_pt[idx] = True
             if pass_index == 0:
                 pace.update(len(idx), time.perf_counter() - t_batch, cut[idx].mean(),
                             len(pts_all) - done, self.schedule.remaining())
             if not self._report(done, within_iteration=pass_index > 0) and done < len(pts_all):
-                if pass_index == 0:
-                    self.stats["gather_incomplete"] = 1
-                    self.schedule.clock.cancelled = True
+                stopped = True
                 break
             show(L, done_pt.reshape(-1, S).all(axis=1))
+        if stopped and pass_index == 0:
+            self.stats["gather_incomplete"] = 1
+            self.schedule.clock.cancelled = True
         return L, cut, done_pt, done
 
-    def _batch(self, idx: NDArray, start: int, pass_index: int, L: NDArray, cut: NDArray) -> None:
-        """Gather the points ``idx`` into ``L`` and ``cut``."""
+    def _batch(self, idx: NDArray, start: int, pass_index: int, L: NDArray, cut: NDArray) -> bool:
+        """Gather the points ``idx`` into ``L`` and ``cut``; False when a cancel abandoned
+        the batch (brute force only: the cuts of a cancelled lightcut batch stay complete)."""
         s, vpls, tree, pace = self.gather.settings, self.vpls, self.tree, self.pace
-        pts = self.gather._shading_points(idx, self.f_bound)
+        pts = self.gather._shading_points(idx)
         if s.gather == "BRUTE_FORCE":
             for part, sel in enumerate((vpls.emitter, ~vpls.emitter)):
                 if sel.any():
-                    L[part, idx] = brute_force(vpls.position[sel], vpls.normal[sel],
-                                               vpls.intensity[sel], pts, clamp=self.clamp)
+                    got = brute_force(vpls.position[sel], vpls.normal[sel], vpls.intensity[sel],
+                                      pts, clamp=self.clamp, keep_going=lambda: self._report(start))
+                    if got is None:
+                        return False
+                    L[part, idx] = got
             cut[idx] = len(vpls)
             self.rays += len(idx) * len(vpls)
-            return
+            return True
         if s.gather == "STOCHASTIC":
             rng = np.random.default_rng([s.seed, PASS_SALT, pass_index, start])
+            ref = (share_refs(self.gather.g, idx, s.stochastic_cut_sharing,
+                              self.gather.scene.camera.window.width)
+                   if s.stochastic_cut_sharing > 1 else None)
             res = stochastic_lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
                                       rng, cut_size=min(pace.cap, s.stochastic_cut_size),
-                                      clamp=self.clamp)
+                                      clamp=self.clamp, cdf=self.cdf, ref=ref)
+            if ref is not None:
+                self.shared += int(np.count_nonzero(ref != np.arange(len(idx))))
         else:
             res = lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts,
                            max_error=pace.error, max_cut_size=pace.cap, clamp=self.clamp,
@@ -258,6 +279,7 @@ class _Sweep:
         self.rays += res.shadow_rays
         self.clamped += res.clamped_energy
         self.unmet += int(res.unmet.sum())
+        return True
 
     def record(self, stats: dict, done: int, cut: NDArray) -> None:
         """The gather's statistics (first pass's cuts; rays and clamp of every pass)."""
@@ -269,6 +291,9 @@ class _Sweep:
         # Points whose cut hit the size cap (or the pacing) before the error rule held.
         stats["cut_bound_unmet"] = self.unmet / done if done else 0.0
         stats["gather_shadow_rays"] = self.rays
+        if self.gather.settings.gather == "STOCHASTIC" and self.gather.settings.stochastic_cut_sharing > 1:
+            # share of the gathered points that used a neighbour's cut (the rest: block heads, edges)
+            stats["shared_cut_fraction"] = self.shared / max(done * stats.get("gather_passes", 1), 1)
         stats["clamped_energy"] = self.clamped / S / stats.get("gather_passes", 1)
 
 
@@ -281,6 +306,23 @@ def spread_order(points: NDArray, seed: int) -> NDArray:
     starts = runs[order]
     idx = (starts[:, None] + np.arange(GATHER_RUN)[None, :]).ravel()
     return points[idx[idx < len(points)]]
+
+
+def share_refs(g: GBuffer, idx: NDArray, block: int, width: int) -> NDArray:
+    """(P,) for the batch's points ``idx`` (G-buffer entries in gather order), the local index
+    of the point whose stochastic cut each uses: the head of its block of ``block``
+    consecutive points when both are alike (:data:`SHARE_COS`, :data:`SHARE_PLANE`, same
+    row and material), else itself.  Which cut a point uses changes only its noise: the
+    shared cut keeps its empty clusters (:func:`.stochastic_lightcuts.shared_cut`)."""
+    j = np.arange(len(idx))
+    head = j - j % block
+    p, n = g.p[idx], g.ns[idx]
+    d = p - p[head]
+    dist = np.sqrt(np.einsum("ij,ij->i", d, d))
+    alike = ((g.mat[idx] == g.mat[idx[head]]) & (g.pixel[idx] // width == g.pixel[idx[head]] // width)
+             & (np.einsum("ij,ij->i", n, n[head]) >= SHARE_COS)
+             & (np.abs(np.einsum("ij,ij->i", d, n[head])) <= SHARE_PLANE * dist))
+    return np.where(alike, head, j)
 
 
 def emitter_share(tree, vpls) -> NDArray:

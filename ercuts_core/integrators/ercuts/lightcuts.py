@@ -43,14 +43,19 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from ... import kernels
 from ...arrays import take_rows
 from ...bsdf import COS_EPS, Bsdf, ggx_cosine_bound
 from ...sampling import INV_PI
 from ...vecmath import dot
+from ...kernels import bounds as kernel_bounds
+from ...kernels import refine
+from .cut_rounds import run_rounds
 from .light_tree import LightTree, luminance
 
-#: Pair budget of one brute-force block (memory ≈ 200 B per pair).
-_BRUTE_BLOCK = 1 << 20
+#: Pair budget of one brute-force block (memory ≈ 200 B per pair; the cancel is polled after
+#: each: 2^20 pairs took up to 2.9 s on the loaded 2-core machine, 2^18 ≈ 0.7 s).
+_BRUTE_BLOCK = 1 << 18
 #: Squared-distance floor that keeps a light sitting on a shading point finite.
 _D2_MIN = 1e-30
 #: Refinement criteria of :func:`lightcut`.
@@ -290,6 +295,8 @@ def cluster_bound(tree: LightTree, node: NDArray, pts: ShadingPoints, pidx: NDAr
     At the glossy points of ``pts.glossy`` the material factor cosbound·f̄ is replaced by
     the per-pair bound M̄ of :class:`GlossyReceivers` (L̄_C = Ḡ_C · Y(M̄ ⊙ I_C)).
     """
+    if kernels.enabled():
+        return _cluster_bound_compiled(tree, node, pts, pidx, clamp)
     bmin, bmax = take_rows(tree.bmin, node), take_rows(tree.bmax, node)
     cb = _receiver_cos_bound(pts, pidx, bmin, bmax)
     inten = take_rows(tree.intensity, node)
@@ -300,6 +307,42 @@ def cluster_bound(tree: LightTree, node: NDArray, pts: ShadingPoints, pidx: NDAr
     g = geometry_bound(take_rows(pts.p, pidx), bmin, bmax, take_rows(tree.cone_axis, node),
                        take_rows(tree.cone_cos, node), clamp)
     return m * np.where(m > 0.0, g, 0.0)
+
+
+def _cluster_bound_compiled(tree: LightTree, node: NDArray, pts: ShadingPoints, pidx: NDArray,
+                            clamp: float) -> NDArray:
+    """:func:`cluster_bound` by :func:`ercuts_core.kernels.bounds.cluster_bounds` (one pass
+    per entry); glossy entries are then recomputed with their per-cluster material bound."""
+    node = np.asarray(node, np.int64)
+    pidx = np.asarray(pidx, np.int64)
+    bound, cb = kernel_bounds.cluster_bounds(pidx, node, *_point_arrays(pts), *_tree_arrays(tree),
+                                             float(clamp))
+    if pts.glossy is None:
+        return bound
+    k = np.flatnonzero(np.asarray(pts.glossy.mask, bool)[pidx])
+    if k.size == 0:
+        return bound
+    nk, pk = node[k], pidx[k]
+    bmin, bmax, inten = take_rows(tree.bmin, nk), take_rows(tree.bmax, nk), take_rows(tree.intensity, nk)
+    m = _glossy_material_bound(pts, pk, bmin, bmax, cb[k], inten, np.zeros(k.size))
+    m = np.where(take_rows(tree.is_leaf, nk), 0.0, m)
+    g = geometry_bound(take_rows(pts.p, pk), bmin, bmax, take_rows(tree.cone_axis, nk),
+                       take_rows(tree.cone_cos, nk), clamp)
+    bound[k] = m * np.where(m > 0.0, g, 0.0)
+    return bound
+
+
+def _point_arrays(pts: ShadingPoints) -> tuple:
+    """(p, n, f_bound, transmissive) of ``pts`` as contiguous arrays for the kernels."""
+    tr = (np.zeros(pts.count, np.bool_) if pts.transmissive is None
+          else np.ascontiguousarray(pts.transmissive, np.bool_))
+    return (np.ascontiguousarray(pts.p, np.float64), np.ascontiguousarray(pts.n, np.float64),
+            np.ascontiguousarray(pts.f_bound, np.float64), tr)
+
+
+def _tree_arrays(tree: LightTree) -> tuple:
+    """(is_leaf, intensity, bmin, bmax, cone_axis, cone_cos) of ``tree`` for the kernels."""
+    return (tree.is_leaf, tree.intensity, tree.bmin, tree.bmax, tree.cone_axis, tree.cone_cos)
 
 
 # -------------------------------------------------------------------------- evaluation
@@ -347,11 +390,13 @@ def evaluate_lights(pts: ShadingPoints, pidx: NDArray, vidx: NDArray, vpl_pos: N
 
 
 def brute_force(vpl_pos: NDArray, vpl_normal: NDArray, vpl_intensity: NDArray,
-                pts: ShadingPoints, clamp: float = 0.0) -> NDArray:
-    """Exact Σ_i M_i G_i V_i I_i over all VPLs (P,3), in blocks of ≤ 2^20 pairs.
+                pts: ShadingPoints, clamp: float = 0.0, keep_going=None) -> NDArray | None:
+    """Exact Σ_i M_i G_i V_i I_i over all VPLs (P,3), in blocks of ≤ 2^18 pairs.
 
     The ablation baseline and the test oracle; uses the same evaluation (and clamp) as
-    :func:`lightcut`.  Loops over blocks only.
+    :func:`lightcut`.  Loops over blocks only.  ``keep_going()`` (optional) is called after
+    every block; False stops and returns None (a batch of 512 points × 5·10⁴ VPLs is
+    ~25 blocks, tens of seconds: Esc must not wait for it).
     """
     vpl_pos, vpl_normal, vpl_intensity = (np.asarray(a, np.float64).reshape(-1, 3)
                                           for a in (vpl_pos, vpl_normal, vpl_intensity))
@@ -369,6 +414,8 @@ def brute_force(vpl_pos: NDArray, vpl_normal: NDArray, vpl_intensity: NDArray,
             vidx = np.tile(np.arange(v0, v1), p1 - p0)
             unit, _, _ = evaluate_lights(pts, pidx, vidx, vpl_pos, vpl_normal, clamp)
             out[p0:p1] += _sum_by(pidx - p0, unit * vpl_intensity[vidx], p1 - p0)
+            if keep_going is not None and keep_going() is False:
+                return None
     return out
 
 
@@ -489,15 +536,22 @@ def _criterion(e: _Entries, est: NDArray, total: NDArray, mode: str, max_error: 
 def _refine(tree: LightTree, e: _Entries, sel: NDArray, pts: ShadingPoints, lights: tuple,
             clamp: float) -> tuple[_Entries, int]:
     """Children entries of the selected entries; one batched evaluation (one visible call)."""
-    node = take_rows(e.node, sel)
+    return _children(tree, take_rows(e.pt, sel), take_rows(e.node, sel), take_rows(e.unit, sel),
+                     take_rows(e.loss, sel), pts, lights, clamp)
+
+
+def _children(tree: LightTree, pidx: NDArray, node: NDArray, unit: NDArray, loss: NDArray,
+              pts: ShadingPoints, lights: tuple, clamp: float) -> tuple[_Entries, int]:
+    """The children of entries (pidx, node) with their parents' unit and loss (S,): first
+    those sharing the parent's representative (same M·G·V, no ray), then the others (one
+    batched evaluation and ``visible`` call); with their bounds."""
     lft, rgt = take_rows(tree.left, node), take_rows(tree.right, node)
     same = np.where(take_rows(tree.rep, lft) == take_rows(tree.rep, node), lft, rgt)
     other = lft + rgt - same
-    pidx = take_rows(e.pt, sel)
-    unit, loss, rays = evaluate_lights(pts, pidx, take_rows(tree.rep, other), *lights, clamp)
+    new_unit, new_loss, rays = evaluate_lights(pts, pidx, take_rows(tree.rep, other), *lights, clamp)
     kids = _Entries(np.concatenate([pidx, pidx]), np.concatenate([same, other]),
-                    np.concatenate([take_rows(e.unit, sel), unit]),
-                    np.concatenate([take_rows(e.loss, sel), loss]), np.zeros(2 * sel.size))
+                    np.concatenate([unit, new_unit]), np.concatenate([loss, new_loss]),
+                    np.zeros(2 * len(pidx)))
     kids.bound = cluster_bound(tree, kids.node, pts, kids.pt, clamp)
     return kids, rays
 
@@ -559,6 +613,10 @@ def lightcut(tree: LightTree, vpl_pos: NDArray, vpl_normal: NDArray, vpl_intensi
     root = np.full(n_pts, tree.root, np.int64)
     unit, loss, rays = evaluate_lights(pts, pidx, tree.rep[root], *lights, clamp)
     e = _Entries(pidx, root, unit, loss, cluster_bound(tree, root, pts, pidx, clamp))
+    if kernels.enabled():
+        return _lightcut_compiled(tree, e, pts, lights, rays, max_error=max_error,
+                                  max_cut_size=max_cut_size, clamp=clamp, abs_floor=abs_floor,
+                                  error_mode=error_mode, return_cut=return_cut, on_round=on_round)
     e = _retire(tree, e, acc)
     rounds = 0
     unmet = np.zeros(n_pts, bool)
@@ -585,6 +643,27 @@ def lightcut(tree: LightTree, vpl_pos: NDArray, vpl_normal: NDArray, vpl_intensi
     acc.add(tree, e)
     res = _result(tree, acc, rays, rounds)
     res.unmet = unmet
+    return res
+
+
+def _lightcut_compiled(tree: LightTree, root: _Entries, pts: ShadingPoints, lights: tuple,
+                       rays: int, *, max_error, max_cut_size, clamp, abs_floor, error_mode,
+                       return_cut, on_round) -> LightcutResult:
+    """The refinement of :func:`lightcut` from the evaluated roots on the compiled kernels
+    (:func:`.cut_rounds.run_rounds`; same rounds, cuts and estimates)."""
+    def children(pt, node, unit, loss):
+        kids, new_rays = _children(tree, pt, node, unit, loss, pts, lights, clamp)
+        return kids.node, kids.unit, kids.loss, kids.bound, new_rays
+
+    mode = {"bound": refine.MODE_BOUND, "literal": refine.MODE_LITERAL,
+            "total": refine.MODE_TOTAL}[error_mode]
+    r = run_rounds(tree, pts.count, root.unit, root.loss, root.bound, children, mode=mode,
+                   max_error=max_error, abs_floor=abs_floor, max_cut_size=max_cut_size,
+                   band=_BAND, on_round=on_round)
+    res = LightcutResult(r.radiance, r.count, r.loss, rays + r.rays, r.rounds, unmet=r.unmet)
+    if return_cut:
+        res.cut_point, res.cut_node, res.cut_bound = r.pt, r.node, r.bound
+        res.cut_estimate = r.unit * tree.intensity[r.node]
     return res
 
 

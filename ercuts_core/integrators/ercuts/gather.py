@@ -21,6 +21,7 @@ from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
 from .pacing import GatherPace, Schedule
 from .stochastic_lightcuts import leaf_cdf, stochastic_lightcut
 from .vpl import GBuffer
+from . import warm_up
 
 #: Absolute lightcut error floor as a fraction of max_error × the mean pixel luminance.
 ABS_FLOOR = 0.1
@@ -103,7 +104,11 @@ class Gather:
         s, g, window = self.settings, self.g, self.scene.camera.window
         Q, S = len(g.pixel), g.samples
         pts_all = spread_order(np.flatnonzero(g.valid), s.seed)
-        if len(vpls) == 0:
+        clock = schedule.clock
+        if not warm_up.wait(lambda: clock.poll(schedule.fraction("Lightcuts", 0.0),
+                                               "Lightcuts: compiling the kernels (first render only)")):
+            stats["gather_incomplete"] = 1          # cancelled while the kernels compiled
+        if len(vpls) == 0 or clock.cancelled:
             pts_all = pts_all[:0]
         sweep = _Sweep(self, vpls, tree, gmax, schedule, stats, pts_all)
         t0 = time.perf_counter()

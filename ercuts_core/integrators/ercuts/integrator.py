@@ -92,6 +92,7 @@ from .progressive import (iteration_end, iteration_settings, iteration_target, m
                           paced_iteration, stratified_jitter)
 from .paths import PathBatch
 from .seeding import seed_paths
+from . import warm_up
 from .vpl import GBuffer, build_gbuffer, g_clamp, make_vpls
 
 #: Conservative throughput of the E1 estimate (light-traced samples per second, 2 cores).
@@ -122,6 +123,7 @@ class ErcutsIntegrator:
         the gather) or the rough image where not gathered; a later one stopped early is
         discarded, so the image is the average of the completed iterations."""
         base, window = self.settings, self.scene.camera.window
+        warm_up.start()                     # compile the gather's kernels during phases 1–4
         target = iteration_target(base.iterations, clock.deadline is not None)
         k, durations = 0, []
         while True:

@@ -234,7 +234,7 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         description=("Neighbouring shading points (in a pixel row) that share one Stochastic "
                      "Lightcuts cut, refined once for them (1 = off); points across an edge keep "
                      "their own. Each point still draws its own lights (unbiased)"),
-        default=_default("stochastic_cut_sharing", 1), min=1, soft_max=16,
+        default=_default("stochastic_cut_sharing", 4), min=1, soft_max=16,
     )
     clamp: FloatProperty(
         name="VPL Clamp",

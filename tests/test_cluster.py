@@ -187,3 +187,75 @@ def test_time_limit_merges_the_completed_iterations(cluster, scene):
 def test_path_frames_are_one_task(cluster, scene):
     s = RenderSettings(integrator="PATH", samples=2, seed=3)
     assert_same_render(cluster_render(scene, s.replace(cluster="auto")), render(scene, s))
+
+
+FRAMES_ARGS = ["blend_scenes/cornell_box.blend", "-s", "1", "-e", "3", "--resolution", "16", "12",
+               "--iterations", "2", "--skip-existing"]
+#: The same frame exported and rendered in one process (render()), for comparison.
+SINGLE = """
+import io, sys, numpy as np
+sys.argv = ["render_frames.py", *sys.argv[1:]]
+sys.path.insert(0, "blend_scenes")
+import render_frames
+from ercuts_core import load_npz, render
+args = render_frames.parse(sys.argv[1:-1])
+args.skip_existing = False
+scene = render_frames.open_scene(args)
+job = next(render_frames.export_frames(scene, [1], args, "cornell_box"))
+np.save(sys.argv[-1], render(load_npz(io.BytesIO(job.npz)), job.settings.replace(cluster="")).image)
+"""
+
+
+@pytest.mark.slow
+def test_frame_range_writes_blender_named_exrs(cluster, tmp_path):
+    """render_frames.py (bpy module, the add-on's exporter) on the cluster: one EXR per frame at
+    Blender's path (cornell_####.exr), written whole (no temporary or checkpoint file is left);
+    an existing frame is kept with --skip-existing; a frame's EXR is the image render() gives for
+    the same exported description (Blender's EXR writer keeps it linear, top row first)."""
+    import subprocess
+    import sys
+
+    from ercuts_core.image_io import read_exr
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "cornell_0002.exr").write_bytes(b"an earlier frame")
+    pattern = str(out / "cornell_####")
+    env = {**os.environ, "PYTHONPATH": root}
+    run = subprocess.run([sys.executable, "blend_scenes/render_frames.py", *FRAMES_ARGS, "-o", pattern,
+                          "--cluster", cluster.address, "--checkpoint"],
+                         cwd=root, env=env, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-3000:]
+    assert sorted(p.name for p in out.iterdir()) == ["cornell_0001.exr", "cornell_0002.exr", "cornell_0003.exr"]
+    assert (out / "cornell_0002.exr").read_bytes() == b"an earlier frame"
+    assert "frame 2: " in run.stdout and "skipped" in run.stdout
+    first, third = (read_exr(out / f"cornell_000{f}.exr")["RGBA"] for f in (1, 3))
+    assert first.shape == (12, 16, 4) and first[..., :3].mean() > 0
+    np.testing.assert_array_equal(first, third)          # a still scene, the same seed
+    single = subprocess.run([sys.executable, "-c", SINGLE, *FRAMES_ARGS, "-o", pattern,
+                             str(tmp_path / "single.npy")],
+                            cwd=root, env=env, capture_output=True, text=True, timeout=300)
+    assert single.returncode == 0, single.stderr[-3000:]
+    np.testing.assert_array_equal(first, np.load(tmp_path / "single.npy"))
+
+
+@pytest.mark.slow
+def test_command_line_cluster_local_writes_the_same_file(tmp_path):
+    """The issue's command, with and without ``--cluster local`` (a cluster started for the call
+    and stopped after it): the same EXR, byte for byte."""
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = {**os.environ, "PYTHONPATH": root}
+    base = [sys.executable, "-m", "ercuts_core", "render", "builtin:cornell_box", "--iterations", "4",
+            "--seed", "7", "--width", "16", "--height", "12"]
+    for name, extra in (("plain", []), ("cluster", ["--cluster", "local"])):
+        run = subprocess.run([*base, "-o", str(tmp_path / f"{name}.exr"), *extra], cwd=root, env=env,
+                             capture_output=True, text=True, timeout=300)
+        assert run.returncode == 0, run.stderr[-3000:]
+    assert (tmp_path / "plain.exr").read_bytes() == (tmp_path / "cluster.exr").read_bytes()
+    bad = subprocess.run([*base, "-o", str(tmp_path / "x.exr"), "--cluster", "nowhere"], cwd=root, env=env,
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "is not 'local', 'auto'" in bad.stderr

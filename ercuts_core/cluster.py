@@ -208,6 +208,7 @@ class IterationResult:
     cancelled: bool = False
     stopped_by: str | None = None
     pid: int = 0                             # the worker process that rendered it
+    max_rss_mb: float = 0.0                  # its peak resident memory so far (MiB)
 
     @property
     def nbytes(self) -> int:
@@ -231,7 +232,15 @@ def render_iteration(npz, settings: dict, k: int) -> IterationResult:
         s = s.replace(threads=CPUS_PER_TASK)
     film, result = render_film(load_npz(io.BytesIO(np.asarray(npz, dtype=np.uint8).tobytes())), s)
     return IterationResult(k, film, dict(result.stats), dict(result.timings), list(result.issues),
-                           tuple(result.full_size), result.cancelled, result.stopped_by, os.getpid())
+                           tuple(result.full_size), result.cancelled, result.stopped_by, os.getpid(),
+                           _max_rss_mb())
+
+
+def _max_rss_mb() -> float:
+    """This process's peak resident set size in MiB (Linux reports KiB)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 # --------------------------------------------------------------------------- one frame's state
@@ -254,6 +263,7 @@ class _FrameState:
     result_bytes: list[int] = field(default_factory=list)
     stopped: str | None = None               # 'time_limit' once the frame's limit stopped it
     rays: int = 0
+    max_rss_mb: float = 0.0
     pids: set = field(default_factory=set)
     resumed: int = 0                         # iterations taken from the checkpoint
     saved: int = 0                           # iterations in the checkpoint on disk
@@ -285,6 +295,7 @@ class _FrameState:
         if self.first is None:
             self.first = res
         self.rays += int(res.stats.get("rays", 0))
+        self.max_rss_mb = max(self.max_rss_mb, res.max_rss_mb)
         self.pids.add(res.pid)
         for name, seconds in res.timings.items():
             self.timings[name] = self.timings.get(name, 0.0) + seconds
@@ -310,7 +321,8 @@ class _FrameState:
         first = self.first
         stats = dict(first.stats) if first else {}
         stats.update(iterations=len(self.done), samples=film.passes_done, nonfinite_samples=film.nonfinite,
-                     rays=self.rays, cluster_workers=len(self.pids), cluster_resumed_iterations=self.resumed,
+                     rays=self.rays, cluster_workers=len(self.pids), cluster_worker_max_rss_mb=self.max_rss_mb,
+                     cluster_resumed_iterations=self.resumed,
                      cluster_scene_bytes=len(job.npz),
                      cluster_result_bytes=float(np.mean(self.result_bytes)) if self.result_bytes else 0.0)
         timings = dict(self.timings)
@@ -473,7 +485,8 @@ class Driver:
         if n_target and state.job.settings.integrator == "ERCUTS":
             f = merged / n_target
         elif state.clock.deadline is not None:
-            f = min((time.perf_counter() - state.clock.start) / (state.clock.deadline - state.clock.start), 1.0)
+            clock = state.clock
+            f = min((time.perf_counter() - clock.start) / (clock.deadline - clock.start), 1.0)
         else:
             f = merged / max(len(state.expected), 1)
         if self.frames_total:

@@ -55,7 +55,8 @@ def render(desc: SceneDescription, settings: RenderSettings | None = None,
 
 
 def render_film(desc: SceneDescription, settings: RenderSettings | None = None,
-                progress: Progress | None = None, preview: Preview | None = None) -> tuple[Film, RenderResult]:
+                progress: Progress | None = None,
+                preview: Preview | None = None) -> tuple[Film, RenderResult]:
     """:func:`render`, also returning its :class:`~ercuts_core.film.Film`: the float64 sums that
     :meth:`Film.merge <ercuts_core.film.Film.merge>` adds, so that renders of separate iteration
     ranges of one frame (``iteration_start``, ``iterations``) merge into the image that one

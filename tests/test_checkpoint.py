@@ -56,7 +56,8 @@ def test_key_names_scene_and_image_settings_only(tmp_path):
 def test_only_the_beginning_of_the_iterations_resumes():
     assert resumable([3, 4], [3, 4, 5, 6], "c.npz") == 2
     assert resumable([], [0, 1], "c.npz") == 0
-    with pytest.raises(CheckpointMismatch, match="holds iterations 0–1, not the beginning of this render's 2–5"):
+    message = "holds iterations 0–1, not the beginning of this render's 2–5"
+    with pytest.raises(CheckpointMismatch, match=message):
         resumable([0, 1], [2, 3, 4, 5], "c.npz")
     with pytest.raises(CheckpointMismatch):
         resumable([0, 1, 2], [0, 1], os.path.join("x", "c.npz"))

@@ -227,7 +227,7 @@ def test_frame_range_writes_blender_named_exrs(cluster, tmp_path):
                           "--cluster", cluster.address, "--checkpoint"],
                          cwd=root, env=env, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-3000:]
-    assert sorted(p.name for p in out.iterdir()) == ["cornell_0001.exr", "cornell_0002.exr", "cornell_0003.exr"]
+    assert sorted(p.name for p in out.iterdir()) == [f"cornell_000{f}.exr" for f in (1, 2, 3)]
     assert (out / "cornell_0002.exr").read_bytes() == b"an earlier frame"
     assert "frame 2: " in run.stdout and "skipped" in run.stdout
     first, third = (read_exr(out / f"cornell_000{f}.exr")["RGBA"] for f in (1, 3))

@@ -321,8 +321,8 @@ class _FrameState:
         first = self.first
         stats = dict(first.stats) if first else {}
         stats.update(iterations=len(self.done), samples=film.passes_done, nonfinite_samples=film.nonfinite,
-                     rays=self.rays, cluster_workers=len(self.pids), cluster_worker_max_rss_mb=self.max_rss_mb,
-                     cluster_resumed_iterations=self.resumed,
+                     rays=self.rays, cluster_workers=len(self.pids),
+                     cluster_worker_max_rss_mb=self.max_rss_mb, cluster_resumed_iterations=self.resumed,
                      cluster_scene_bytes=len(job.npz),
                      cluster_result_bytes=float(np.mean(self.result_bytes)) if self.result_bytes else 0.0)
         timings = dict(self.timings)

@@ -30,8 +30,12 @@ ROOT = os.path.dirname(HERE)
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
+if HERE not in sys.path:
+    sys.path.insert(0, HERE)
+
 import addon  # noqa: E402  (before bpy-dependent imports of the core; see addon.compat)
 import bpy  # noqa: E402
+from render_blend import open_blend  # noqa: E402
 
 #: Seconds between two progress lines.
 PROGRESS_SECONDS = 5.0
@@ -62,17 +66,11 @@ def parse(argv):
 
 def open_scene(args):
     """Load the .blend and apply the command line's overrides; returns its scene."""
-    if not hasattr(bpy.types.Scene, "ercuts"):
-        addon.register()
-    bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
-    scene = bpy.context.scene
+    scene = open_blend(args.blend, args.resolution)
     for key in ("iterations", "samples", "seed", "time_limit"):
         value = getattr(args, key)
         if value is not None:
             setattr(scene.ercuts, key, value)
-    if args.resolution:
-        scene.render.resolution_x, scene.render.resolution_y = args.resolution
-        scene.render.resolution_percentage = 100
     if args.output:
         scene.render.filepath = os.path.abspath(args.output)
     addon.compat.set_single_layer_exr(scene.render.image_settings)

@@ -195,18 +195,21 @@ def markdown(m: dict, mod: dict) -> str:
         L += ["*Quick run (`--quick`): 64×48, 4 iterations, one round.*", ""]
     L += [f"One frame of the {SCENE} at {w}×{h}, {n} ERCUTS iterations, seed 1, medians of "
           f"{m['repeats']} interleaved rounds (each case a fresh process).", "",
-          "| case | frame time (s) | iterations/s | peak RSS (MiB) | cluster start-up (s) | first frame (s) |",
+          "| case | frame time (s) | iterations/s | peak RSS (MiB) | cluster start-up (s) "
+          "| first frame (s) |",
           "|---|---|---|---|---|---|"]
     p = rows["plain"]
     L.append(f"| plain `render()` (1 thread) | {median([r['wall_s'] for r in p]):.2f} | "
-             f"{median([n / r['wall_s'] for r in p]):.3f} | {median([r['peak_rss_mb'] for r in p]):.0f} | – | – |")
+             f"{median([n / r['wall_s'] for r in p]):.3f} | "
+             f"{median([r['peak_rss_mb'] for r in p]):.0f} | – | – |")
     for name in ("1 worker", "2 workers"):
         rs = rows[name]
         L.append(f"| local cluster, {name} | {median([r['wall_s'] for r in rs]):.2f} | "
                  f"{median([n / r['wall_s'] for r in rs]):.3f} | driver "
                  f"{median([r['driver_rss_mb'] for r in rs]):.0f} + worker "
                  f"{median([r['worker_rss_mb'] for r in rs]):.0f} | "
-                 f"{median([r['startup_s'] for r in rs]):.1f} | {median([r['first_frame_s'] for r in rs]):.1f} |")
+                 f"{median([r['startup_s'] for r in rs]):.1f} | "
+                 f"{median([r['first_frame_s'] for r in rs]):.1f} |")
     t_plain = median([r["wall_s"] for r in p])
     t_one = median([r["wall_s"] for r in rows["1 worker"]])
     scene_b = median([r["scene_bytes"] for r in rows["2 workers"]])
@@ -222,7 +225,8 @@ def markdown(m: dict, mod: dict) -> str:
           "| resolution | iteration (s) | gather (s) | gather share |", "|---|---|---|---|"]
     for key, r in m["plain_sizes"].items():
         t = r["timings"]
-        L.append(f"| {key} | {t['render']:.2f} | {t.get('cuts', 0):.2f} | {t.get('cuts', 0) / t['render']:.0%} |")
+        cuts = t.get("cuts", 0)
+        L.append(f"| {key} | {t['render']:.2f} | {cuts:.2f} | {cuts / t['render']:.0%} |")
     share = max(r["timings"].get("cuts", 0) / r["timings"]["render"] for r in m["plain_sizes"].values())
     L += ["", "Tiles would split only the gather; the phases before it (rough BDPT, direct light, "
           "chains, VPLs, tree) stay whole in one task, and the iteration's VPLs, tree and G-buffer "

@@ -87,6 +87,8 @@ def cmd_render(args) -> int:
     for issue in result.issues:
         print(f"{issue.severity}: {issue.message}", file=sys.stderr)
     write_exr(args.output, result.image)
+    if args.checkpoint and result.stopped_by is None and os.path.exists(args.checkpoint):
+        os.unlink(args.checkpoint)          # the frame is complete: nothing left to resume
     png = args.png or os.path.splitext(args.output)[0] + ".png"
     write_png(png, result.image)
     print(f"Ercuts {__version__} {settings.integrator}: {result.summary()}")
@@ -148,8 +150,9 @@ def main(argv: list[str] | None = None) -> int:
                         "'local' starts one on this machine for the call, 'auto' joins the running "
                         "one, or ray://HOST:PORT, HOST:PORT; the same image as without it")
     r.add_argument("--checkpoint", metavar="PATH",
-                   help="with --cluster: keep the merged iterations in this .npz after each one and "
-                        "resume from it when it exists (same scene and settings)")
+                   help="with --cluster: keep the merged iterations in this .npz while rendering and "
+                        "resume from it when it exists (same scene and settings); removed once the "
+                        "image is written")
     r.set_defaults(func=cmd_render)
     s = sub.add_parser("save-builtin", help="save a built-in scene as .npz",
                        description="Save a built-in scene as one .npz scene description.")

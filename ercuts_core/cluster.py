@@ -366,7 +366,9 @@ class Driver:
             on_frame: Callable[[FrameJob, RenderResult], None] | None = None) -> list[RenderResult | None]:
         """Render ``jobs`` (pulled one at a time, as the cluster has room: an exporter can
         produce them lazily); ``on_frame(job, result)`` after each completed frame. Returns
-        the frames' results in order (a frame stopped by a cancel last, possibly None).
+        the results not handed to ``on_frame``, in order: every frame's without it, else only
+        those of frames a cancel stopped (None for one with nothing merged and no window), so
+        a long animation does not pile up its images here.
 
         Raises:
             ClusterError: a task raised (the others are cancelled).
@@ -385,9 +387,10 @@ class Driver:
                 while active and (active[0].complete or self.stopped_by):
                     state = active.pop(0)
                     res = self._finish(state)
-                    results.append(res)
                     if res is not None and on_frame is not None and not self.stopped_by:
                         on_frame(state.job, res)
+                    else:
+                        results.append(res)
                     self.frames_done += 1
                 if self.stopped_by:
                     break
@@ -562,6 +565,6 @@ def render_frames(jobs: Iterable[FrameJob], address: str, on_frame: Callable[[Fr
                   progress: Progress | None = None, frames_total: int | None = None) -> list:
     """Render an animation's frames on the cluster at ``address``; ``on_frame(job, result)``
     writes each completed frame (``jobs`` may be a generator: frames are exported while the
-    cluster renders the earlier ones). Returns the results in frame order."""
+    cluster renders the earlier ones). Returns the results of frames a cancel stopped."""
     with connect(address) as ray:
         return Driver(ray, progress, None, frames_total).run(jobs, on_frame)

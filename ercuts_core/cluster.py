@@ -22,7 +22,8 @@ framework for emerging AI applications"; ``ray`` is the optional ``cluster`` ext
   cancels every task of the render (``ray.cancel``) and returns the iterations merged so far.
 * **Time limit.** ``time_limit`` is the driver's budget from the frame's first task: tasks
   render full-quality iterations (a paced iteration would depend on timing, not only on (seed,
-  k)); with ``iterations = 0`` iterations are submitted until the limit. At the limit the running
+  k)); with ``iterations = 0`` iterations are submitted until the limit. A PATH or BDPT frame's
+  one task keeps the limit itself. At the limit the running
   tasks are cancelled and the completed iterations merged in index order; the first iteration is
   always waited for, so an image has at least one.
 * **Faults.** A task whose worker process dies is re-run by Ray (``max_retries`` =
@@ -70,8 +71,6 @@ TASK_OVERHEAD_BYTES = 200 << 20
 #: Seconds between two checkpoint writes of a frame (a write is the whole film: ~230 bytes a
 #: pixel); a stop, an exception in the driver and the frame's end always write.
 CHECKPOINT_SECONDS = 10.0
-#: Settings fields a task never receives: where it runs, and the driver's time budget.
-_DRIVER_ONLY = {"cluster": "", "time_limit": 0.0}
 #: The job's runtime environment: this ``ercuts_core`` package, uploaded to the cluster once
 #: per connection (cached by content), so every worker runs the driver's core.
 RUNTIME_ENV = {"py_modules": [os.path.dirname(os.path.abspath(__file__))]}
@@ -217,6 +216,15 @@ class IterationResult:
         arrays = [v for v in vars(f).values() if isinstance(v, np.ndarray)]
         arrays += [np.asarray(v) for v in f.aov_sum.values()]
         return int(sum(a.nbytes for a in arrays))
+
+
+def task_settings(settings: RenderSettings) -> RenderSettings:
+    """What a task renders with: never on a cluster itself, and for ERCUTS without the time
+    limit, which stays the driver's (a paced iteration would depend on timing); a PATH or BDPT
+    frame is one task, which keeps it."""
+    if settings.integrator == "ERCUTS":
+        return settings.replace(cluster="", time_limit=0.0)
+    return settings.replace(cluster="")
 
 
 def render_iteration(npz, settings: dict, k: int) -> IterationResult:
@@ -441,7 +449,7 @@ class Driver:
                        name=f"ercuts {job.scene} f{job.frame} it{k}")
         if job.memory_bytes and self.largest_node_memory:
             options["memory"] = int(min(job.memory_bytes, 0.9 * self.largest_node_memory))
-        settings = job.settings.replace(**_DRIVER_ONLY).to_dict()
+        settings = task_settings(job.settings).to_dict()
         ref = self.task.options(**options).remote(state.ref, settings, k)
         self.in_flight[ref] = (state, k)
         state.expected.append(k)

@@ -530,7 +530,8 @@ class Driver:
             self._checkpoint(state, force=True)
             state.merge_waiting()
         state.ref = None                                   # frees the description
-        return state.result(self.stopped_by or state.stopped)
+        task_stop = state.first.stopped_by if state.first else None     # a PATH/BDPT frame's own limit
+        return state.result(self.stopped_by or state.stopped or task_stop)
 
     def _cancel_all(self) -> None:
         for ref in list(self.in_flight):

@@ -19,6 +19,7 @@ from ercuts_core import RenderSettings, render
 from ercuts_core.checkpoint import CheckpointMismatch, load_checkpoint
 from ercuts_core.cluster import ClusterError, Driver, FrameJob, connect, frame_job, npz_bytes
 from ercuts_core.cluster import render as cluster_render
+from ercuts_core.render import render_film
 from ercuts_core.scenes import cornell_box
 
 FAST = dict(integrator="ERCUTS", samples=4, chain_length=20, chains_per_pixel=0.5, direct_samples=8)
@@ -150,7 +151,8 @@ def test_cancel_stops_every_task_and_keeps_the_merged_iterations(cluster, scene)
 
 def test_interrupted_driver_resumes_from_its_checkpoint(cluster, scene, reference, tmp_path):
     """The driver is interrupted (KeyboardInterrupt in its progress callback) once a checkpoint
-    exists; it keeps the merged iterations in the checkpoint, and the same render with the same
+    exists; it keeps the merged iterations in the checkpoint (their float64 sums are those of a
+    single-process render of as many iterations, bit for bit), and the same render with the same
     checkpoint renders only the rest: the image is the uninterrupted one, bit for bit."""
     path = str(tmp_path / "frame.ckpt.npz")
 
@@ -165,6 +167,12 @@ def test_interrupted_driver_resumes_from_its_checkpoint(cluster, scene, referenc
 
     film, done = load_checkpoint(path, checkpoint_key(job.npz, ON_CLUSTER))
     assert done == list(range(len(done))) and 1 <= len(done) < 6 and film.passes_done == len(done)
+    single = render_film(scene, SETTINGS.replace(iterations=len(done)))[0]     # float64 sums too
+    for name, value in vars(single).items():
+        if isinstance(value, np.ndarray):
+            np.testing.assert_array_equal(getattr(film, name), value, err_msg=name)
+    for name, value in single.aov_sum.items():
+        np.testing.assert_array_equal(film.aov_sum[name], value, err_msg=name)
     _wait_for_idle_cpus()
     resumed = cluster_render(scene, ON_CLUSTER, checkpoint=path)
     assert resumed.stats["cluster_resumed_iterations"] == len(done)

@@ -28,6 +28,7 @@ The Rendered viewport (``view_update``/``view_draw``) lives in :mod:`.viewport`.
 """
 from __future__ import annotations
 
+import functools
 import inspect
 import time
 import traceback
@@ -85,6 +86,18 @@ def _accepts_preview(render_fn) -> bool:
         return "preview" in inspect.signature(render_fn).parameters
     except (TypeError, ValueError):
         return False
+
+
+def _render_function(settings, is_preview: bool, scene):
+    """The core's ``render``, or with a Cluster address (final renders) the cluster's, which
+    streams the merged iterations to the same progress and preview callbacks."""
+    import ercuts_core
+
+    if not settings.cluster or is_preview:
+        return ercuts_core.render
+    from ercuts_core import cluster
+
+    return functools.partial(cluster.render, scene=scene.name, frame=scene.frame_current)
 
 
 class RenderInterrupted(Exception):
@@ -205,7 +218,8 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         kwargs = {}
         if _accepts_preview(ercuts_core.render):
             kwargs["preview"] = self._preview_callback(scene.render, desc, layer_name)
-        result = ercuts_core.render(desc, settings, progress=self._progress, **kwargs)
+        result = _render_function(settings, self._is_preview(), scene)(
+            desc, settings, progress=self._progress, **kwargs)
 
         images, missing = passes.pass_images(result, enabled)
         framebuffer.write_image(self, scene.render, images, result.window, layer_name)

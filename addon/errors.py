@@ -15,6 +15,8 @@ def error_message(exc: Exception) -> str:
         known += (ExportError,)
         from ercuts_core.validate import SceneError
         known += (SceneError,)
+        from ercuts_core.cluster import ClusterError
+        known += (ClusterError,)
     except ImportError:
         pass
     if isinstance(exc, known):

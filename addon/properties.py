@@ -11,7 +11,7 @@ core's frozen dataclass.
 from __future__ import annotations
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from . import passes
 
@@ -298,6 +298,14 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         description=("Memory the render may use, in MiB (0 = no limit); batch sizes follow it and "
                      "a render whose estimate exceeds it is refused before allocating"),
         default=_default("memory_budget_mb", 4096), min=0, soft_max=65536,
+    )
+    cluster: StringProperty(
+        name="Cluster",
+        description=("Render the iterations of final renders as tasks on a Ray cluster (needs the "
+                     "'ray' package in Blender's Python): empty = this computer, 'local' = a Ray "
+                     "cluster started here for the render, 'auto' = the running cluster, "
+                     "'ray://host:port' or 'host:port'; the image is the same"),
+        default=_default("cluster", ""),
     )
 
     # ---- add-on-only settings (not in RenderSettings; listed in ADDON_ONLY_NAMES)

@@ -219,6 +219,7 @@ class ERCUTS_RENDER_PT_performance(ErcutsClosedPanel, bpy.types.Panel):
         layout.prop(settings, "time_limit")
         if "memory_budget_mb" in settings.bl_rna.properties:
             layout.prop(settings, "memory_budget_mb")
+        layout.prop(settings, "cluster")
 
 
 # --------------------------------------------------------------------------- output / view layer

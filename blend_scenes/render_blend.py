@@ -42,22 +42,29 @@ def parse(argv):
     return p.parse_args(argv)
 
 
+def open_blend(path: str, resolution=None):
+    """Register the add-on (once), open the .blend at ``path`` and, if given, set its
+    ``resolution`` (W, H) at 100 %; returns its scene."""
+    if not hasattr(bpy.types.Scene, "ercuts"):
+        addon.register()
+    bpy.ops.wm.open_mainfile(filepath=os.path.abspath(path))
+    scene = bpy.context.scene
+    if resolution:
+        scene.render.resolution_x, scene.render.resolution_y = resolution
+        scene.render.resolution_percentage = 100
+    return scene
+
+
 def main(argv=None) -> int:
     if argv is None:
         argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
     args = parse(argv)
-    if not hasattr(bpy.types.Scene, "ercuts"):
-        addon.register()
-    bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
-    scene = bpy.context.scene
+    scene = open_blend(args.blend, args.resolution)
     scene.render.engine = args.engine
     for key in ("samples", "rough_samples", "iterations", "integrator", "max_depth", "time_limit", "seed"):
         value = getattr(args, key)
         if value is not None:
             setattr(scene.ercuts, key, value)
-    if args.resolution:
-        scene.render.resolution_x, scene.render.resolution_y = args.resolution
-        scene.render.resolution_percentage = 100
     name = os.path.splitext(os.path.basename(args.blend))[0]
     out = os.path.abspath(args.output or os.path.join(ROOT, "out", name))
     os.makedirs(os.path.dirname(out), exist_ok=True)

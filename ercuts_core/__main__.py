@@ -4,6 +4,7 @@ examples:
   python -m ercuts_core render builtin:s_corridor -o out/s_corridor.exr --samples 64
   python -m ercuts_core render bug_report.npz -o out/frame.exr --integrator PATH
   python -m ercuts_core save-builtin cornell_box cornell.npz
+  python -m ercuts_core render builtin:cornell_box -o out/c.exr --iterations 4 --cluster local
 """
 # The module docstring is the --help text: plain text, no reStructuredText markup.
 from __future__ import annotations
@@ -19,7 +20,7 @@ from .description import load_npz, save_npz
 from .image_io import write_exr, write_png
 from .render import render
 from .scenes import SCENES
-from .settings import RenderSettings, quick_time_limit
+from .settings import RenderSettings, quick_time_limit, valid_cluster_address
 from .validate import SceneError
 
 
@@ -59,16 +60,26 @@ def _progress_bar():
     return bar, progress
 
 
+def _cluster_address(value: str) -> str:
+    """argparse type of ``--cluster``: an address :attr:`RenderSettings.cluster` accepts."""
+    if not value or not valid_cluster_address(value):
+        raise argparse.ArgumentTypeError(f"{value!r} is not 'local', 'auto', ray://HOST:PORT or HOST:PORT")
+    return value
+
+
 def cmd_render(args) -> int:
     desc = _load(args.scene, args.width, args.height)
     settings = RenderSettings(integrator=args.integrator, samples=args.samples,
                               rough_samples=args.rough_samples, seed=args.seed,
                               max_depth=args.max_depth, time_limit=quick_time_limit(args.time_limit),
-                              iterations=args.iterations)
+                              iterations=args.iterations, cluster=args.cluster or "")
+    if args.checkpoint and not args.cluster:
+        print("error: --checkpoint needs --cluster (use --cluster local on one machine)", file=sys.stderr)
+        return 2
     bar, progress = _progress_bar()
     t0 = time.perf_counter()
     try:
-        result = render(desc, settings, progress)
+        result = _render(desc, settings, progress, args)
     except SceneError as exc:
         bar.close()
         print(f"error: {exc}", file=sys.stderr)
@@ -77,6 +88,8 @@ def cmd_render(args) -> int:
     for issue in result.issues:
         print(f"{issue.severity}: {issue.message}", file=sys.stderr)
     write_exr(args.output, result.image)
+    if args.checkpoint and result.stopped_by is None and os.path.exists(args.checkpoint):
+        os.unlink(args.checkpoint)          # the frame is complete: nothing left to resume
     png = args.png or os.path.splitext(args.output)[0] + ".png"
     write_png(png, result.image)
     print(f"Ercuts {__version__} {settings.integrator}: {result.summary()}")
@@ -87,6 +100,19 @@ def cmd_render(args) -> int:
             json.dump({"settings": settings.to_dict(), "timings": result.timings,
                        "stats": result.stats}, fh, indent=2)
     return 0
+
+
+def _render(desc, settings: RenderSettings, progress, args):
+    """``render`` here, or with ``--cluster`` on the cluster (:mod:`ercuts_core.cluster`): a task
+    error or a missing ``ray`` becomes a :class:`SceneError`-like one-line error."""
+    if not args.cluster:
+        return render(desc, settings, progress)
+    from .cluster import ClusterError, render as cluster_render
+
+    try:
+        return cluster_render(desc, settings, progress, scene=args.scene, checkpoint=args.checkpoint)
+    except ClusterError as exc:
+        raise SceneError(str(exc)) from exc
 
 
 def cmd_save_builtin(args) -> int:
@@ -124,6 +150,14 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--width", type=int, help="built-in scenes only: image width in pixels")
     r.add_argument("--height", type=int, help="built-in scenes only: image height in pixels")
     r.add_argument("--stats", help="write settings, timings and statistics as JSON here")
+    r.add_argument("--cluster", metavar="ADDRESS", type=_cluster_address,
+                   help="render the iterations as tasks on a Ray cluster (needs the 'cluster' extra): "
+                        "'local' starts one on this machine for the call, 'auto' joins the running "
+                        "one, or ray://HOST:PORT, HOST:PORT; the same image as without it")
+    r.add_argument("--checkpoint", metavar="PATH",
+                   help="with --cluster: keep the merged iterations in this .npz while rendering and "
+                        "resume from it when it exists (same scene and settings); removed once the "
+                        "image is written")
     r.set_defaults(func=cmd_render)
     s = sub.add_parser("save-builtin", help="save a built-in scene as .npz",
                        description="Save a built-in scene as one .npz scene description.")

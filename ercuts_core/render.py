@@ -25,7 +25,7 @@ from .scene import BuiltScene
 from .settings import RenderSettings
 from .validate import sanitize
 
-__all__ = ["render", "make_integrator", "PREVIEW_INTERVAL", "Progress", "Preview"]
+__all__ = ["render", "render_film", "make_integrator", "PREVIEW_INTERVAL", "Progress", "Preview"]
 
 
 def make_integrator(scene: BuiltScene, settings: RenderSettings) -> Integrator:
@@ -51,6 +51,16 @@ def render(desc: SceneDescription, settings: RenderSettings | None = None,
     Raises:
         SceneError: when the scene cannot be rendered (no camera, empty resolution, ...).
     """
+    return render_film(desc, settings, progress, preview)[1]
+
+
+def render_film(desc: SceneDescription, settings: RenderSettings | None = None,
+                progress: Progress | None = None,
+                preview: Preview | None = None) -> tuple[Film, RenderResult]:
+    """:func:`render`, also returning its :class:`~ercuts_core.film.Film`: the float64 sums that
+    :meth:`Film.merge <ercuts_core.film.Film.merge>` adds, so that renders of separate iteration
+    ranges of one frame (``iteration_start``, ``iterations``) merge into the image that one
+    render of all of them gives (:mod:`ercuts_core.cluster`)."""
     settings = settings or RenderSettings()
     clock = Clock(settings.time_limit, progress, preview)
     timings: dict[str, float] = {}
@@ -82,7 +92,7 @@ def render(desc: SceneDescription, settings: RenderSettings | None = None,
     stats["samples"] = film.passes_done
     stats["nonfinite_samples"] = film.nonfinite
     timings["total"] = time.perf_counter() - clock.start
-    return RenderResult(
+    return film, RenderResult(
         image=film.image(),
         window=window.rect,
         full_size=(scene.camera.width, scene.camera.height),

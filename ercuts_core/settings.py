@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 from dataclasses import dataclass, fields
 
 INTEGRATORS = ("ERCUTS", "BDPT", "PATH")
@@ -34,6 +35,16 @@ def quick_time_limit(limit: float) -> float:
     if not quick():
         return limit
     return min(limit, QUICK_TIME_LIMIT) if limit > 0 else QUICK_TIME_LIMIT
+
+
+#: ``RenderSettings.cluster`` values: '' (this process), 'local', 'auto', 'ray://host:port'
+#: (Ray client) or 'host:port' (a head node's GCS address).
+CLUSTER_ADDRESS = re.compile(r"(|local|auto|(ray://)?[A-Za-z0-9_.\-\[\]:]+:[0-9]{1,5})")
+
+
+def valid_cluster_address(address: str) -> bool:
+    """``address`` is a value :attr:`RenderSettings.cluster` accepts (:data:`CLUSTER_ADDRESS`)."""
+    return isinstance(address, str) and CLUSTER_ADDRESS.fullmatch(address) is not None
 
 
 @dataclass(frozen=True)
@@ -127,6 +138,13 @@ class RenderSettings:
         memory_budget_mb: memory the render may allocate, in MiB (0 = no limit); batch
             sizes are derived from it and a render whose estimate exceeds it even with the
             smallest batches is refused before allocating (:mod:`ercuts_core.memory`).
+        cluster: where :func:`ercuts_core.cluster.render` (the command line's ``--cluster``,
+            the add-on's final renders) runs the render's iterations as Ray tasks: '' = in
+            this process (:func:`ercuts_core.render` always renders here), 'local' = a Ray
+            cluster started on this machine for the render, 'auto' = the running cluster this
+            machine belongs to, 'ray://host:port' (Ray client) or 'host:port' (the head's GCS).
+            Needs the optional ``ray`` package (the ``cluster`` extra); the image does not
+            depend on it (:mod:`ercuts_core.cluster`).
     """
 
     integrator: str = "ERCUTS"
@@ -164,6 +182,7 @@ class RenderSettings:
     e1_samples: int = 256
     normalize_to_p: bool = False
     memory_budget_mb: int = 4096
+    cluster: str = ""
 
     def __post_init__(self):
         if self.integrator not in INTEGRATORS:
@@ -202,6 +221,9 @@ class RenderSettings:
             raise ValueError(f"clamp must be >= 0, got {self.clamp}")
         if self.memory_budget_mb < 0:
             raise ValueError(f"memory_budget_mb must be >= 0 (0 = no limit), got {self.memory_budget_mb}")
+        if not valid_cluster_address(self.cluster):
+            raise ValueError(f"cluster must be '', 'local', 'auto', 'ray://host:port' or 'host:port', "
+                             f"got {self.cluster!r}")
 
     @classmethod
     def from_dict(cls, d: dict) -> "RenderSettings":

@@ -83,6 +83,7 @@ def test_extension_zip_contents(dist):
         assert prefix == "ercuts_core-" or "-cp311-cp311-" in wheel, wheel
         assert prefix == "ercuts_core-" or "linux" in wheel, wheel
     assert not [w for w in wheels if "numpy" in w]  # Blender ships numpy
+    assert not [w for w in wheels if w.startswith("wheels/ray-")]  # Ray: the optional 'cluster' extra
     assert "bl_info" in init and "preferences" in init
     assert not [n for n in names if "__pycache__" in n or n.endswith(".pyc") or n.startswith("vendor/")]
     core_py = {os.path.relpath(p, ROOT).replace(os.sep, "/")

@@ -46,3 +46,14 @@ def test_core_imports_in_a_plain_interpreter():
     code = "import sys, ercuts_core; assert 'bpy' not in sys.modules; print('ok')"
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
+
+
+@pytest.mark.parametrize("address", ["", "local", "auto", "ray://head.example:10001", "10.0.0.5:6379"])
+def test_cluster_addresses(address):
+    assert RenderSettings(cluster=address).cluster == address
+
+
+@pytest.mark.parametrize("address", ["ray://", "head", "http://head:1", "local "])
+def test_bad_cluster_addresses_raise(address):
+    with pytest.raises(ValueError, match="cluster must be"):
+        RenderSettings(cluster=address)

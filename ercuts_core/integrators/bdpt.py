@@ -283,7 +283,7 @@ class BDPTIntegrator(Integrator):
                                  *self._connect_vertices(cam, lig, no_s0, lane, s, t))
             if not self.camera.is_delta_direction:
                 for lane, s, t in self._rows_t1(lig).chunks(self.max_rows):
-                    self._connect_camera(film, lig, no_s0, lane, s, t)
+                    self._connect_camera(film, lig, no_s0, lane, s, t, rng)
         film.add_samples(pix, L.sum(axis=0), alpha, parts=L)
         if self.on_connections is not None:
             self.on_connections(cam, lig, self._pending)
@@ -324,7 +324,7 @@ class BDPTIntegrator(Integrator):
         w = self.window
         cam.raster = w.raster(pix).astype(np.float64)
         cam.raster += rng.random((n, 2))
-        o, d = self.camera.generate_rays(cam.raster)
+        o, d = self.camera.generate_rays(cam.raster, self.camera.lens_samples(rng, n))
         cam.p[0] = o
         cam.beta[0] = 1.0
         alpha = self._random_walk(cam, np.arange(n), o, d, np.ones((n, 3)), np.zeros(n),
@@ -362,6 +362,8 @@ class BDPTIntegrator(Integrator):
             o = np.where(on_surf[:, None], tracer.offset(p, nl, d), p)
             self._random_walk(lig, lanes, o, d, e.beta[lanes], e.pdf_dir[lanes], rng,
                               importance=True)
+            hit = lanes[lig.count[lanes] > 1]        # soft-falloff lights light a subset
+            lig.count[hit[~lights.emission_reaches(e.light[hit], e.p[hit], lig.p[1, hit])]] = 1
         return lig, no_s0
 
     def _random_walk(self, path: Subpaths, lanes: NDArray, o: NDArray, d: NDArray,
@@ -678,11 +680,11 @@ class BDPTIntegrator(Integrator):
         return idx[vis], (c * wgt[:, None])[vis]
 
     def _connect_camera(self, film: Film, lig: Subpaths, no_s0: NDArray, lane: NDArray,
-                        s: NDArray, t: NDArray) -> None:
-        """t = 1: connect light vertex s−1 to the camera and splat (light tracing)."""
+                        s: NDArray, t: NDArray, rng: np.random.Generator) -> None:
+        """t = 1: connect light vertex s−1 to the camera (a lens point) and splat (light tracing)."""
         camera = self.camera
         qs = lig.rows(s - 1, lane)
-        conn = camera.connect(qs.p)
+        conn = camera.connect(qs.p, camera.lens_samples(rng, len(lane)))
         # In the view, and leaving on the side the light path arrived from (else f = 0)
         idx = np.flatnonzero(conn.valid & (dot(qs.wo, qs.ng) * dot(conn.wi, qs.ng) > 0))
         if len(idx) == 0:
@@ -691,7 +693,7 @@ class BDPTIntegrator(Integrator):
         k = s - 1
         p, ng, ns, wo = qs.p, qs.ng, qs.ns, qs.wo
         wi, factor = conn.wi[idx], conn.factor[idx]
-        raster, dist = conn.raster[idx], conn.dist[idx]
+        raster, dist, eye = conn.raster[idx], conn.dist[idx], conn.origin[idx]
         bsdf = self.scene.bsdf(lig.at("mat", k, lane), ns, ng, p)
         # One evaluation toward the light vertex's predecessor gives f (the BSDF is
         # reciprocal, f(wi, wo) = f(wo, wi)) and the reverse density for MIS.
@@ -703,13 +705,13 @@ class BDPTIntegrator(Integrator):
         if len(keep) == 0:
             return
         lane, s, t, k, c, p, ng, wo, wi = (a[keep] for a in (lane, s, t, k, c, p, ng, wo, wi))
-        raster, dist = raster[keep], dist[keep]
+        raster, dist, eye = raster[keep], dist[keep], eye[keep]
         # The camera strategy's density of this vertex: one camera sample over the window
         qs_rev = camera.pdf_area(-wi, dist, dot(ng, wi))
         qsm_rev = pdf_rev[keep] * qs.g_prev[keep]
         w = self._mis_weight(None, lig, lane, s, t, None, None, qs_rev=qs_rev, qsm_rev=qsm_rev,
                              qs_fwd=lig.at("pdf_fwd", k, lane), no_s0=no_s0[lane])
-        vis = self.scene.tracer.visible(p, ng, np.broadcast_to(camera.position, p.shape), None)
+        vis = self.scene.tracer.visible(p, ng, np.ascontiguousarray(eye), None)
         raster, c, s, t = raster[vis], (c * w[:, None])[vis], s[vis], t[vis]
         film.add_splats(raster, c, path_class(s + t - 2))
         if self.on_connections is not None:

@@ -104,7 +104,7 @@ def lens_perturbation(ctx: MutationContext, x: PathBatch, rng: np.random.Generat
     phi = 2 * np.pi * rng.random(n)
     y.raster = x.raster + np.c_[r * np.cos(phi), r * np.sin(phi)]
     valid = _in_window(scene, y.raster)
-    o, d = scene.camera.generate_rays(y.raster)
+    o, d = scene.camera.rays_from(y.raster, x.p[:, 0])      # the path's lens point stays
     surf = scene.intersect(o, d)
     valid &= surf.valid
     rows = np.flatnonzero(valid)
@@ -154,12 +154,12 @@ def caustic_perturbation(ctx: MutationContext, x: PathBatch, rng: np.random.Gene
     valid &= surf.valid
     rows = np.flatnonzero(valid)
     _set_vertex(y, rows, 1, surf.p[rows], surf.ng[rows], surf.ns[rows], surf.mat[rows])
-    raster, on_film = cam.raster_of(surf.p)
+    raster, on_film = cam.raster_of(surf.p, x.p[:, 0] if cam.has_lens else None)
     valid &= on_film
     y.raster = np.where(valid[:, None], raster, x.raster)
     rows = np.flatnonzero(valid)
     if len(rows):
-        seen = scene.tracer.visible(np.broadcast_to(cam.position, (len(rows), 3)).copy(), None,
+        seen = scene.tracer.visible(np.ascontiguousarray(x.p[rows, 0]), None,
                                     surf.p[rows], surf.ng[rows])
         valid[rows[~seen]] = False
     # The reverse move must be able to rotate back: θ inside y's own (scaled) range. The
@@ -195,21 +195,9 @@ def _light_vertex_pdf(scene: BuiltScene, paths: PathBatch, rows: NDArray) -> NDA
     vertex's own measure: area (area lights, emissive triangles), counting (point, sun)
     or solid angle (environment: the density of the direction stored in slot k); the
     light-selection pmf included."""
-    lights = scene.lights
-    light = paths.light[rows]
-    kind, loc = lights.kind[light], lights.local[light]
-    area = np.ones(len(rows))
-    a, t = kind == AREA, kind == TRI
-    area[a] = lights.ar_area[loc[a]]
-    area[t] = lights.tri_area[loc[t]]
-    out = lights.pmf(light) / area
-    env = kind == ENV
-    if lights.env_map is None:
-        out[env] /= 4 * np.pi                     # uniform sphere (kept bit-identical)
-    elif env.any():
-        e = rows[env]
-        out[env] *= lights.env_pdf_dir(slot_rows(paths.p, e, paths.k[e]))
-    return out
+    k = paths.k[rows]
+    return scene.lights.pdf_illuminate_vertex(paths.light[rows], slot_rows(paths.p, rows, k - 1),
+                                              slot_rows(paths.p, rows, k))
 
 
 def bidirectional_mutation(ctx: MutationContext, x: PathBatch, rng: np.random.Generator) -> Proposal:
@@ -278,7 +266,7 @@ def bidirectional_mutation(ctx: MutationContext, x: PathBatch, rng: np.random.Ge
         kind = lights.kind[ls.light]
         ok = ls.valid
         infinite = (kind == SUN) | (kind == ENV)
-        lp = np.where(infinite[:, None], ls.wi, ls.p)
+        lp = np.where(infinite[:, None], ls.wi, lights.chain_vertex(ls.light, ls.p))
         y.light[r] = ls.light
         slot = y.k[r]
         y.p[r, slot] = lp

@@ -180,8 +180,7 @@ def _emitted(scene: BuiltScene, paths: PathBatch, rows: NDArray, w_out: NDArray)
     out = np.zeros((len(rows), 3))
     m = kind == AREA
     if m.any():
-        facing = dot(lights.ar_n[loc[m]], w_out[m]) > 0
-        out[m] = lights.ar_L[loc[m]] * facing[:, None]
+        out[m] = lights.area_radiance(loc[m], w_out[m])
     m = kind == TRI
     if m.any():
         out[m] = lights.tri_radiance_at(loc[m], slot_rows(paths.p, rows[m], paths.k[rows[m]]))

@@ -131,12 +131,14 @@ class Connection:
     """A group of R sampled paths (unoccluded, MIS-weighted contribution w·C ≠ 0) of one
     batch: lane, s and t (R,) each; ``e`` (R,) Y(w·C) in image units (t = 1 rows divided by
     the number of window pixels, as their splats are, so Σe estimates the image energy);
-    ``light_sample`` for s = 1 rows, ``raster`` (R, 2) for t = 1 rows."""
+    ``light_sample`` for s = 1 rows, ``raster`` (R, 2) and ``eye`` (R, 3) (the camera point
+    connected to: the pinhole or a lens point) for t = 1 rows."""
 
     def __init__(self, lane: NDArray, s: NDArray, t: NDArray, e: NDArray,
-                 light_sample: LightSample | None = None, raster: NDArray | None = None):
+                 light_sample: LightSample | None = None, raster: NDArray | None = None,
+                 eye: NDArray | None = None):
         self.lane, self.s, self.t, self.e = lane, s, t, e
-        self.light_sample, self.raster = light_sample, raster
+        self.light_sample, self.raster, self.eye = light_sample, raster, eye
 
 
 class VertexRows:
@@ -716,7 +718,7 @@ class BDPTIntegrator(Integrator):
         film.add_splats(raster, c, path_class(s + t - 2))
         if self.on_connections is not None:
             self._pending.append(Connection(lane[vis], s, t, luminance(c) / self.window.n_pixels,
-                                            raster=raster))
+                                            raster=raster, eye=eye[vis]))
         if self.strategy_images is not None and len(c):
             win = self.window
             pix, ok = win.pixel(raster)

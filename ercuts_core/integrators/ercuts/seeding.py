@@ -78,8 +78,8 @@ class SeedCollector:
         P.mat[rows, k] = 0
         P.k[:], P.light[:] = k, light
         P.raster[:] = rec.raster if rec.raster is not None else cam.raster[lane]
-        if rec.raster is not None and self.scene.camera.has_lens:    # t = 1: the splat's lens point
-            P.p[rows, 0] = self.scene.camera.lens_point_of(P.raster, P.p[rows, 1])
+        if rec.eye is not None:                          # t = 1: the lens point connected to
+            P.p[rows, 0] = rec.eye
         return P
 
 

@@ -583,7 +583,8 @@ class LightSet:
             if spread.any():                   # cosine-weighted inside the spread cone
                 j = i[spread]
                 w_local[spread] = sample_cosine_cone(ud[spread], np.sin(self.ar_half[j]))
-                La[spread] *= area_spread.attenuation(w_local[spread, 2], self.ar_half[j], self.ar_k[j])[:, None]
+                att = area_spread.attenuation(w_local[spread, 2], self.ar_half[j], self.ar_k[j])
+                La[spread] *= att[:, None]
             t, b = coordinate_system(nn)
             dm = to_world(w_local, t, b, nn)
             cos[m] = w_local[:, 2]

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .description import (AreaLights, CameraDesc, MaterialTable, MeshTable, PointLights, SceneDescription, SunLights,
-                          WorldMap)
+from .description import (AreaLights, CameraDesc, MaterialTable, MeshTable, PointLights, SceneDescription,
+                          SunLights, WorldMap)
 from .sampling import luminance
 from .shading.program import compile_program
 from .shading.textures import TextureTable, missing_image

@@ -525,3 +525,13 @@ def test_matrix_copy_is_world_space():
     child.matrix_parent_inverse = Matrix.Identity(4)
     desc = h.export().description
     assert np.allclose(desc.mesh.positions[:, 2], 10)
+
+
+def test_lights_shown_to_the_camera_warn():
+    """Cycles shows a light with a size to camera rays when its Camera visibility is on (off by
+    default for lights); Ercuts never does, and says so."""
+    ob = h.light("AREA", energy=10.0, size=1.0)
+    assert not ob.visible_camera                                   # Blender's default
+    assert _lights().warnings == []
+    ob.visible_camera = True
+    assert any("visible to the camera" in w for w in h.export().warnings)

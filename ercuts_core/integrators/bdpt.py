@@ -34,7 +34,10 @@ Conventions shared with the path tracer (:mod:`.path`, the oracle):
 * ``max_depth`` = number of scattering vertices; Russian roulette from ``rr_depth`` on
   both subpaths (camera: survival min(1, max β) as in PATH; light: min(1, max β/max β₀),
   relative to the emitted throughput, since light-subpath β carries the light's power).
-* Lights (:mod:`..lights`): POINT/SUN are delta lights; AREA lights cannot be hit by rays,
+* Lights (:mod:`..lights`): POINT/SUN are delta lights (or, with a radius or an angle,
+  soft lights whose emission densities :meth:`LightSet.illuminate` reports for the s = 1
+  MIS weights; a soft-falloff light's subpath is dropped when its first hit is not lit,
+  :meth:`LightSet.emission_reaches`); they and AREA lights cannot be hit by rays,
   so the s = 0 strategy does not exist for them and they are excluded from that MIS
   term exactly like delta lights. SUN/ENV light subpaths start on a disk of radius R
   (the scene's bounding sphere); as in pbrt-v3 the *direction* density (incl. selection)
@@ -43,8 +46,10 @@ Conventions shared with the path tracer (:mod:`.path`, the oracle):
 * Camera: the camera ray density for one sample spread over the rendered window
   (``Camera.pdf_area``) is the camera strategy's density; with one light subpath per
   camera sample, this is the matching normalization for the per-pixel splat importance
-  of ``Camera.connect`` [pbrt-v3 PerspectiveCamera::Pdf_We / We]. Orthographic cameras
-  are delta in direction: no t = 1 strategy.
+  of ``Camera.connect`` [pbrt-v3 PerspectiveCamera::Pdf_We / We]. With depth of field the
+  camera vertex is a lens point (camera rays and t = 1 connections each draw one; the
+  densities keep their pinhole form, :mod:`..camera`). Orthographic cameras are delta in
+  direction: no t = 1 strategy.
 * Shading normals: light-subpath vertices use Veach's adjoint correction
   |wo·ns||wi·ng| / (|wo·ng||wi·ns|) (pbrt-v3 ``CorrectShadingNormal``, Importance mode);
   connection cosines use the shading normal, densities the geometric normal.

@@ -6,13 +6,14 @@ All of them work in the measure of :mod:`.paths` (raster position of x1, then
 area/counting/solid-angle measures for x2 … x_k).
 
 * **Lens perturbation** [Veach 1997 §11.4.3; Mitsuba ``mut_lens.cpp``]: move the raster
-  position by r ∈ [0.1 px, √(0.05·W·H/π) px] with density ∝ 1/r, re-trace x1, reconnect
-  to the fixed x2. Symmetric: ratio = 1.
+  position by r ∈ [0.1 px, √(0.05·W·H/π) px] with density ∝ 1/r, re-trace x1 (from the
+  path's own lens point x0 with depth of field), reconnect to the fixed x2. Symmetric: ratio = 1.
 * **Caustic perturbation** [Veach 1997 §11.4.4; Mitsuba ``mut_caustic.cpp``]: rotate the
   direction x2 → x1 by θ ∈ [θ1, θ2] (∝ 1/θ, scaled by |x0x1|/|x1x2| so x1 moves about as
   much as under the lens perturbation), re-trace x1 from the fixed x2 and connect it to
-  the pinhole. The angular density is symmetric and cancels; the Jacobian from raster to
-  the direction at x2 does not: ratio = J(x)/J(y), J = cos³θ_cam·|x0x1|²/|x1x2|².
+  the pinhole (the path's lens point x0). The angular density is symmetric and cancels; the
+  Jacobian from raster to the direction at x2 does not: ratio = J(x)/J(y),
+  J = cos³θ_cam·|x0x1|²/|x1x2|² (the same with a thin lens, θ measured at x0).
 * **Multi-chain perturbation** [Veach 1997 §11.4.5]: needs two specular chains; the
   material model has no delta lobes, so it never applies (reported as 0 proposals).
 * **Bidirectional mutation** [Veach 1997 §11.4.2], restricted to deletions that start at

@@ -37,6 +37,10 @@ SPOT_COSINE_FALLOFF = VERSION < (4, 0, 0)
 #: (``bump_shadowing_term``, kernel/closure/bsdf.h; models in ercuts_core/bump_shadowing.py):
 #: Chiang et al. 2019 up to 4.4, Estevez et al. 2019 from 4.5 on (Cycles commit 11e282522).
 BUMP_SHADOWING = "ESTEVEZ2019" if VERSION >= (4, 5, 0) else "CHIANG2019"
+#: Point/spot lights with a radius: from 4.0 on Cycles makes them spheres unless *Soft
+#: Falloff* is on (``is_sphere = !use_soft_falloff``, Blender's default is on); 3.x always
+#: uses the disk facing the receiver (``kernel/light/light.h`` of Cycles 3.4).
+HAS_SPHERE_LIGHTS = VERSION >= (4, 0, 0)
 
 
 # --------------------------------------------------------------------------- render result
@@ -275,6 +279,36 @@ def area_light_radiance_scale(light, area: float) -> float:
             return 1.0 / math.pi
         return 1.0 / (math.pi * area)
     return 1.0 / (4.0 * area)
+
+
+def point_light_is_sphere(light) -> bool:
+    """The shape Cycles gives a point/spot light of radius > 0: a sphere (True) when Soft
+    Falloff is off (≥ 4.0), else the disk facing the receiver (every 3.x)."""
+    return HAS_SPHERE_LIGHTS and not getattr(light, "use_soft_falloff", True)
+
+
+def point_light_intensity_scale(light) -> float:
+    """Factor turning a point/spot light's colour·power·2^exposure into intensity I [W/sr]
+    (the core's radiance over the light's disk or sphere is I/(π·r²)).
+
+    Cycles ``scene/light.cpp``: radiance = P·invarea/π with invarea = 1/(4πr²) (4 for r = 0)
+    when ``normalize`` is on (always on 3.x), 1 when it is off (≥ 4.x): I = P/(4π); without
+    normalisation I = P/π at r = 0 and I = L·πr² = P·r² otherwise.
+    """
+    if getattr(light, "normalize", True):
+        return 1.0 / (4.0 * math.pi)
+    r = float(light.shadow_soft_size)
+    return 1.0 / math.pi if r <= 0 else r * r
+
+
+def sun_irradiance_scale(light) -> float:
+    """Factor turning a sun's colour·strength·2^exposure into irradiance E [W/m²]: 1, or
+    π·sin²(angle/2) when ``normalize`` is off (Cycles: the strength is then the radiance of the
+    sun disk instead of the irradiance it gives)."""
+    half = 0.5 * float(light.angle)
+    if getattr(light, "normalize", True) or half <= 0:
+        return 1.0
+    return math.pi * math.sin(half) ** 2
 
 
 def world_override(view_layer):

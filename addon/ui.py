@@ -350,10 +350,12 @@ class ERCUTS_LIGHT_PT_light(ErcutsPanel, bpy.types.Panel):
         col.prop(light, "color")
         col.prop(light, "energy")
         for extra in ("exposure", "normalize"):
-            if hasattr(light, extra) and not (extra == "normalize" and light.type != "AREA"):
+            if hasattr(light, extra):
                 col.prop(light, extra)
         if light.type in {"POINT", "SPOT"}:
             col.prop(light, "shadow_soft_size", text="Radius")
+            if hasattr(light, "use_soft_falloff"):
+                col.prop(light, "use_soft_falloff")
         elif light.type == "SUN":
             col.prop(light, "angle")
         elif light.type == "AREA":
@@ -364,6 +366,8 @@ class ERCUTS_LIGHT_PT_light(ErcutsPanel, bpy.types.Panel):
             else:
                 sub.prop(light, "size", text="Size X")
                 sub.prop(light, "size_y", text="Y")
+            if hasattr(light, "spread"):
+                col.prop(light, "spread")
         if light.type == "SPOT":
             col.separator()
             col.prop(light, "spot_size", text="Spot Size")

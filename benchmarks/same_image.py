@@ -29,6 +29,9 @@ CASES = [
     ("s_corridor_brute", "s_corridor", {"width": 48, "height": 36}, {"gather": "BRUTE_FORCE"}),
     ("cornell_box_bdpt", "cornell_box", {"width": 64, "height": 48}, {"integrator": "BDPT", "samples": 4}),
     ("s_corridor_path", "s_corridor", {"width": 64, "height": 48}, {"integrator": "PATH", "samples": 4}),
+    # point and spot lights (delta: radius 0) through every integrator
+    ("point_lit_box_ercuts", "point_lit_box", {"width": 32, "height": 24}, {}),
+    ("point_lit_box_bdpt", "point_lit_box", {"width": 32, "height": 24}, {"integrator": "BDPT", "samples": 4}),
 ]
 #: Statistics that measure time or memory (never compared).
 TIMED = ("memory_estimate_mb",)

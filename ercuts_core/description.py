@@ -165,8 +165,14 @@ class PointLights:
         direction: (P, 3) float32 unit spot axis (the direction the spot points).
         cos_half_angle: (P,) float32 cosine of half the spot's full cone angle; −1 for point lights.
         blend: (P,) float32 Blender spot_blend in [0, 1] (smoothstep falloff width).
-        radius: (P,) float32 Blender's soft-shadow radius [m] (rendered as a point, see notes).
+        radius: (P,) float32 Blender's ``shadow_soft_size`` [m]; 0 = a point (sharp shadows).
+            A light of radius r > 0 has radiance I/(π·r²) over its disk or sphere
+            (:mod:`ercuts_core.sphere_lights`).
         object_ids: (P,) int32 index into ``object_names``.
+        sphere: (P,) bool, how a light of radius > 0 is shaped (Cycles' ``is_sphere``): True =
+            a sphere (Blender ≥ 4.0 with *Soft Falloff* off); False = a disk facing each
+            receiver (*Soft Falloff* on, Blender's default, and every Blender 3.x).
+            None (default): False for every light.
     """
 
     position: F32
@@ -176,6 +182,7 @@ class PointLights:
     blend: F32
     radius: F32
     object_ids: I32
+    sphere: NDArray[np.bool_] | None = None
 
     def __post_init__(self):
         for name in ("position", "intensity", "direction"):
@@ -183,6 +190,8 @@ class PointLights:
         for name in ("cos_half_angle", "blend", "radius"):
             object.__setattr__(self, name, _f32(getattr(self, name), ()).reshape(-1))
         object.__setattr__(self, "object_ids", _i32(self.object_ids).reshape(-1))
+        sphere = np.zeros(len(self.object_ids), bool) if self.sphere is None else self.sphere
+        object.__setattr__(self, "sphere", np.ascontiguousarray(sphere, dtype=bool).reshape(-1))
 
     def __len__(self) -> int:
         return int(self.position.shape[0])
@@ -195,7 +204,8 @@ class SunLights:
     Attributes:
         direction: (S, 3) float32 unit direction the light travels (Blender: local −Z).
         irradiance: (S, 3) float32 irradiance on a surface facing the sun [W/m²].
-        angle: (S,) float32 angular diameter [rad] (rendered as 0, see notes).
+        angle: (S,) float32 angular diameter [rad]: directions are uniform in the cone of
+            half-angle angle/2 around the sun (Cycles ≥ 4.0); 0 = a delta direction.
         object_ids: (S,) int32.
     """
 
@@ -232,6 +242,9 @@ class AreaLights:
         radiance: (A, 3) float32 [W·sr⁻¹·m⁻²].
         shape: (A,) int32, SHAPE_RECT or SHAPE_ELLIPSE.
         object_ids: (A,) int32.
+        spread: (A,) float32 Blender's ``spread`` [rad] in (0, π]: the full angle of the cone
+            the light emits into (a soft-box grid, :mod:`ercuts_core.area_spread`); π (the
+            default, also for None) is a plain Lambertian emitter.
     """
 
     center: F32
@@ -241,12 +254,15 @@ class AreaLights:
     radiance: F32
     shape: I32
     object_ids: I32
+    spread: F32 | None = None
 
     def __post_init__(self):
         for name in ("center", "axis_u", "axis_v", "normal", "radiance"):
             object.__setattr__(self, name, _f32(getattr(self, name), (3,)))
         object.__setattr__(self, "shape", _i32(self.shape).reshape(-1))
         object.__setattr__(self, "object_ids", _i32(self.object_ids).reshape(-1))
+        spread = np.full(len(self.object_ids), np.pi) if self.spread is None else self.spread
+        object.__setattr__(self, "spread", _f32(spread, ()).reshape(-1))
 
     def __len__(self) -> int:
         return int(self.center.shape[0])
@@ -283,6 +299,13 @@ class CameraDesc:
             *bottom* (Blender's convention); used when ``use_border``.
         use_border: render only the border window.
         clip_start, clip_end: [m].
+        aperture_radius: thin-lens aperture radius [m] (Cycles: lens·10⁻³/(2·f-stop) when
+            depth of field is on); 0 = a pinhole (perspective only).
+        focus_distance: depth of the plane in focus along the viewing axis [m] (Blender's
+            focus distance, or the focus object's distance along the camera's −Z).
+        aperture_blades: polygonal aperture with this many blades; 0 (or < 3) = a disk.
+        aperture_rotation: rotation of the blades [rad].
+        aperture_ratio: anamorphic ratio (the aperture's x extent is divided by it).
     """
 
     world_from_camera: F64
@@ -302,6 +325,11 @@ class CameraDesc:
     use_border: bool = False
     clip_start: float = 1e-3
     clip_end: float = 1e30
+    aperture_radius: float = 0.0
+    focus_distance: float = 10.0
+    aperture_blades: int = 0
+    aperture_rotation: float = 0.0
+    aperture_ratio: float = 1.0
 
     def __post_init__(self):
         m = np.ascontiguousarray(np.asarray(self.world_from_camera, dtype=np.float64))
@@ -309,6 +337,9 @@ class CameraDesc:
         object.__setattr__(self, "width", int(self.width))
         object.__setattr__(self, "height", int(self.height))
         object.__setattr__(self, "border", tuple(float(b) for b in self.border))
+        object.__setattr__(self, "aperture_blades", int(self.aperture_blades))
+        for name in ("aperture_radius", "focus_distance", "aperture_rotation", "aperture_ratio"):
+            object.__setattr__(self, name, float(getattr(self, name)))
 
 
 @dataclass(frozen=True)

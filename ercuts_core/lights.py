@@ -23,6 +23,14 @@ InfiniteAreaLight::Power).
 Spot falloff follows Cycles ≥ 4.0: smoothstep((cosθ − cos½)/((1 − cos½)·blend)), a hard
 edge when blend = 0 (``blender/cycles src/kernel/light/spot.h``).
 
+Soft lights, as Cycles renders them: a point or spot light of radius r > 0 is a sphere or a
+disk facing the receiver of radiance I/(π·r²) (:mod:`.sphere_lights`); a sun of angle θ > 0
+has radiance E/(π·sin²(θ/2)) over the cone of half-angle θ/2, sampled uniformly in solid
+angle (Cycles ``distant.h``); an area light of spread s < π emits into a cone with Cycles'
+soft-box attenuation (:mod:`.area_spread`). None of them can be hit by rays (next-event
+estimation and light tracing only), so their radius-0 / angle-0 / spread-π forms keep the
+exact code paths (and images) of the delta and plain lights.
+
 Densities (all include the light-selection pmf):
 
 * ``illuminate``: solid-angle density at the receiver (``pdf_w``); delta lights report
@@ -41,18 +49,23 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from . import area_spread, sphere_lights
 from .description import SHAPE_ELLIPSE, SceneDescription
 from .envmap import EnvMap
 from .sampling import (
     Distribution1D,
     coordinate_system,
+    cosine_cone_pdf,
     luminance,
+    sample_cosine_cone,
     sample_cosine_hemisphere,
     sample_uniform_cone,
+    sample_uniform_cone_omc,
     sample_uniform_disk_concentric,
     sample_uniform_sphere,
     sample_uniform_triangle,
     to_world,
+    uniform_cone_pdf_omc,
 )
 from .vecmath import dot, normalize
 
@@ -71,16 +84,19 @@ class LightSample:
     """Result of :meth:`LightSet.illuminate` for N receivers.
 
     Attributes:
-        Li: (N, 3) incident radiance (area/tri/env), I(ω)/d² (point) or E (sun).
+        Li: (N, 3) incident radiance (area/tri/env, soft point/spot, sun with an angle),
+            I(ω)/d² (point of radius 0) or E (sun of angle 0).
         wi: (N, 3) unit direction receiver → light.
         dist: (N,) distance to the light point (inf for SUN/ENV).
         pdf_w: (N,) solid-angle density incl. selection (selection pmf for delta lights).
-        is_delta: (N,) point/spot/sun.
+        is_delta: (N,) point/spot of radius 0, sun of angle 0.
         light: (N,) global light index.
         p: (N, 3) point on the light (for SUN/ENV: receiver + wi·2R).
         n: (N, 3) light normal at p (zeros for POINT; −wi... for SUN/ENV: the direction of travel).
-        pdf_pos: (N,) area density of p as an ``emit`` start point incl. selection (BDPT).
-        pdf_dir: (N,) solid-angle density that ``emit`` leaves p toward the receiver (BDPT).
+        pdf_pos: (N,) area density of p as an ``emit`` start point incl. selection (BDPT);
+            soft point/spot: 1/(π·r²) per unit projected area of the emitted line.
+        pdf_dir: (N,) solid-angle density that ``emit`` leaves p toward the receiver (BDPT);
+            soft point/spot: scaled so that pdf_dir/dist² is the emission's (sphere_lights).
         valid: (N,) the sample carries energy.
     """
 
@@ -103,8 +119,11 @@ class Emission:
 
     Attributes:
         p: (N, 3) start point; d: (N, 3) unit direction; n: (N, 3) light normal
-            (zeros for POINT; the direction for SUN/ENV).
-        Le: (N, 3) radiance along d (intensity for POINT, irradiance for SUN).
+            (zeros for POINT; the direction for SUN/ENV). A point/spot light of radius r > 0
+            starts its line on the sphere or at the line's closest point to the centre
+            (:mod:`.sphere_lights`; :meth:`LightSet.emission_reaches` tests the first hit).
+        Le: (N, 3) radiance along d (intensity for a point of radius 0, irradiance for a
+            sun of angle 0).
         pdf_pos: (N,) area density of p incl. selection (selection pmf for POINT).
         pdf_dir: (N,) solid-angle density of d (1 for SUN: delta direction).
         beta: (N, 3) Le·|cos|/(pdf_pos·pdf_dir): the subpath's initial throughput.
@@ -156,8 +175,16 @@ class LightSet:
         self.pt_axis = normalize(pl.direction.astype(np.float64) + 1e-300)[0]
         self.pt_cos = pl.cos_half_angle.astype(np.float64)
         self.pt_blend = pl.blend.astype(np.float64)
+        self.pt_radius = pl.radius.astype(np.float64)
+        self.pt_sphere = pl.sphere.astype(bool)
+        self.pt_soft = self.pt_radius > 0
         self.sun_dir = sl.direction.astype(np.float64)
         self.sun_E = sl.irradiance.astype(np.float64)
+        half = 0.5 * sl.angle.astype(np.float64)
+        self.sun_cone = half > 0
+        self.sun_omc = 2.0 * np.sin(0.5 * half) ** 2           # 1 − cos(half), precise
+        sin2 = np.where(self.sun_cone, np.sin(half) ** 2, 1.0)
+        self.sun_L = self.sun_E / (np.pi * sin2)[:, None]      # radiance over the cone
         self.ar_c = al.center.astype(np.float64)
         self.ar_u = al.axis_u.astype(np.float64)
         self.ar_v = al.axis_v.astype(np.float64)
@@ -166,6 +193,9 @@ class LightSet:
         self.ar_ellipse = al.shape == SHAPE_ELLIPSE
         uv = np.linalg.norm(np.cross(self.ar_u, self.ar_v), axis=1)
         self.ar_area = np.where(self.ar_ellipse, np.pi * uv, 4.0 * uv)
+        self.ar_plain = al.spread >= area_spread.PLAIN
+        self.ar_half = np.where(self.ar_plain, 0.5 * np.pi, 0.5 * al.spread.astype(np.float64))
+        self.ar_k = np.where(self.ar_plain, 1.0, area_spread.normalization(np.minimum(self.ar_half, 1.5)))
         self.tri_index = self.emissive_tris
         self.tri_p = tri_p[self.emissive_tris]
         self.tri_n = tri_ng[self.emissive_tris]
@@ -292,6 +322,11 @@ class LightSet:
             w_out, d = normalize(x[m] - p[m])
             Li[m] = self.pt_I[i] * self.spot_factor(i, w_out)[:, None] / np.maximum(d, 1e-30)[:, None] ** 2
             pdf_dir[m] = np.where(self.pt_cos[i] > -1, 1.0 / (2 * np.pi * (1 - self.pt_cos[i])), _INV_4PI)
+        soft = self._rows(m, loc, self.pt_soft)
+        if soft.any():
+            j = loc[soft]
+            p[soft], pdf_soft, inside = sphere_lights.sample_from_receiver(
+                self.pt_pos[j], self.pt_radius[j], self.pt_sphere[j], x[soft], u[soft])
         m = kind == SUN
         if m.any():
             i = loc[m]
@@ -300,6 +335,11 @@ class LightSet:
             Li[m] = self.sun_E[i]
             pdf_area[m] = 1.0 / (np.pi * self.radius**2)
             pdf_dir[m] = 1.0
+        cone = self._rows(m, loc, self.sun_cone)
+        if cone.any():
+            j = loc[cone]
+            w = self._sun_direction(j, -self.sun_dir[j], u[cone])
+            p[cone], nl[cone], Li[cone] = x[cone] + w * r2, -w, self.sun_L[j]
         surfaces = ((AREA, self._area_point, self.ar_n, self.ar_L, self.ar_area),
                     (TRI, self._tri_point, self.tri_n, self.tri_L, self.tri_area))
         for surface_kind, point, normal, radiance, area in surfaces:   # uniform in area
@@ -310,6 +350,9 @@ class LightSet:
                 nl[m] = normal[i]
                 Lsurf[m] = radiance[i] if surface_kind == AREA else self.tri_radiance_at(i, p[m])
                 pdf_area[m] = 1.0 / area[i]
+        spread = self._rows(kind == AREA, loc, ~self.ar_plain)
+        if spread.any():
+            p[spread], pdf_area[spread], reach = self._spread_point(loc[spread], x[spread], u[spread])
         m = kind == ENV
         if m.any():
             w, pdf_dir[m] = self.env_sample(u[m])
@@ -320,20 +363,84 @@ class LightSet:
         wi, dist = normalize(p - x)
         infinite = (kind == SUN) | (kind == ENV)
         dist = np.where(infinite, np.inf, dist)
-        is_delta = (kind == POINT) | (kind == SUN)
+        is_delta = ((kind == POINT) | (kind == SUN)) & ~soft & ~cone
         # Solid-angle density for surface emitters: p_A · d² / |cos_l|.
         surf = (kind == AREA) | (kind == TRI)
         cos_l = -dot(nl, wi)
         facing = np.where(kind == AREA, cos_l > 0, np.abs(cos_l) > 0)
+        if spread.any():
+            j = loc[spread]
+            Lsurf[spread] *= (area_spread.attenuation(cos_l[spread], self.ar_half[j], self.ar_k[j])
+                              * reach)[:, None]
         Li = np.where((surf & facing)[:, None], Lsurf, Li)
         pdf_dir = np.where(surf, np.maximum(np.where(kind == AREA, cos_l, np.abs(cos_l)), 0) / np.pi
                            * np.where(kind == TRI, 0.5, 1.0), pdf_dir)
+        if spread.any():
+            pdf_dir[spread] = self._spread_pdf_dir(loc[spread], cos_l[spread])
         pdf_w = np.where(surf, pdf_area * np.where(np.isfinite(dist), dist, 0) ** 2 /
                          np.maximum(np.abs(cos_l), 1e-300), 1.0)
         pdf_w = np.where(kind == ENV, pdf_dir, pdf_w) * sel
         pdf_w = np.where(is_delta, sel, pdf_w)
+        if cone.any():
+            pdf_w[cone] = sel[cone] * uniform_cone_pdf_omc(self.sun_omc[loc[cone]])
+        if soft.any():
+            pdf_w[soft] = sel[soft] * pdf_soft
+            Li[soft], pdf_area[soft], pdf_dir[soft] = self._soft_point_sample(
+                loc[soft], x[soft], p[soft], -wi[soft], dist[soft], inside)
         valid = (sel > 0) & (luminance(Li) > 0) & np.isfinite(pdf_w) & (pdf_w > 0)
         return LightSample(Li, wi, dist, pdf_w, is_delta, light, p, nl, pdf_area * sel, pdf_dir, valid)
+
+    @staticmethod
+    def _rows(m: NDArray, loc: NDArray, flag: NDArray) -> NDArray:
+        """(N,) rows of kind mask ``m`` whose light (local index ``loc``) has ``flag`` set."""
+        out = np.zeros(len(m), bool)
+        out[m] = flag[loc[m]]
+        return out
+
+    def _sun_direction(self, j: NDArray, axis: NDArray, u: NDArray) -> NDArray:
+        """(N, 3) directions uniform in the cone of suns ``j`` about unit ``axis`` (Cycles
+        ``distant_light_sample``: half-angle = angle/2)."""
+        t, b = coordinate_system(axis)
+        return to_world(sample_uniform_cone_omc(u, self.sun_omc[j]), t, b, axis)
+
+    def _soft_point_sample(self, j, x, p, w_out, dist, inside):
+        """Radiance, pdf_pos (without selection) and pdf_dir of next-event samples p of soft
+        point/spot lights ``j`` toward receivers x (:mod:`.sphere_lights` for the densities)."""
+        r = self.pt_radius[j]
+        spot = np.where(inside, 1.0, self.spot_factor(j, w_out))
+        Li = self.pt_I[j] * (spot / (np.pi * r * r))[:, None]
+        o = sphere_lights.line_start(self.pt_pos[j], self.pt_sphere[j], p, w_out)
+        d_o2 = np.maximum(dot(x - o, x - o), 1e-300)
+        pdf_dir = np.where(inside, 0.0, self._point_dir_pdf(j, w_out) * dist * dist / d_o2)
+        return Li, 1.0 / (np.pi * r * r), pdf_dir
+
+    def _point_dir_pdf(self, j: NDArray, w: NDArray) -> NDArray:
+        """(N,) density of :meth:`emit`'s direction for point/spot lights ``j``: uniform in
+        the spot cone (0 outside), uniform on the sphere for point lights."""
+        cos_h = self.pt_cos[j]
+        inside = dot(self.pt_axis[j], w) >= cos_h
+        return np.where(cos_h > -1, inside / (2 * np.pi * (1 - cos_h)), _INV_4PI)
+
+    def _spread_point(self, j: NDArray, x: NDArray, u: NDArray):
+        """Points of spread area lights ``j`` for receivers x: uniform in the parameter box
+        that can reach x (:func:`.area_spread.clip_box`).
+
+        Returns:
+            p (N, 3), area density (N,) (1 where nothing can reach: then reach = 0), reach
+            (N,) 1.0 for points of the light that may light x, else 0.
+        """
+        c, au, av = self.ar_c[j], self.ar_u[j], self.ar_v[j]
+        lo, hi, ok = area_spread.clip_box(x, c, au, av, self.ar_n[j], self.ar_half[j])
+        ab = lo + (hi - lo) * u
+        p = c + ab[:, :1] * au + ab[:, 1:] * av
+        box = np.prod(hi - lo, axis=1) * np.linalg.norm(np.cross(au, av), axis=1)
+        on_light = np.where(self.ar_ellipse[j], (ab * ab).sum(axis=1) <= 1.0, True)
+        return p, np.where(ok, 1.0 / np.where(ok, box, 1.0), 1.0), (ok & on_light).astype(np.float64)
+
+    def _spread_pdf_dir(self, j: NDArray, cos_l: NDArray) -> NDArray:
+        """(N,) emission direction density of spread area lights ``j`` at cosθ ``cos_l``."""
+        half = self.ar_half[j]
+        return cosine_cone_pdf(cos_l, np.cos(half), np.sin(half))
 
     # ------------------------------------------------------------ hits on emitters
     def tri_radiance(self, prim: NDArray, p: NDArray | None = None) -> NDArray:
@@ -412,6 +519,13 @@ class LightSet:
             p[m] = self.pt_pos[i]
             Le[m] = self.pt_I[i] * self.spot_factor(i, d[m])[:, None]
             pdf_dir[m] = 1.0 / (2 * np.pi * (1 - cos_max))
+        soft = self._rows(m, loc, self.pt_soft)
+        if soft.any():                         # a line within r of the centre (sphere_lights)
+            j = loc[soft]
+            r = self.pt_radius[j]
+            p[soft] = sphere_lights.emit_points(self.pt_pos[j], r, self.pt_sphere[j], d[soft], u_pos[soft])
+            Le[soft] /= (np.pi * r * r)[:, None]
+            pdf_pos[soft] = 1.0 / (np.pi * r * r)
         for kind_id, dirs in ((SUN, None), (ENV, None)):
             m = kind == kind_id
             if not m.any():
@@ -419,6 +533,11 @@ class LightSet:
             if kind_id == SUN:
                 dm = self.sun_dir[loc[m]]
                 Le[m] = self.sun_E[loc[m]]
+                cone = self.sun_cone[loc[m]]
+                if cone.any():                 # uniform in the sun's cone (Cycles distant.h)
+                    rows, j = np.flatnonzero(m)[cone], loc[m][cone]
+                    dm[cone] = self._sun_direction(j, self.sun_dir[j], u_dir[rows])
+                    Le[rows], pdf_dir[rows] = self.sun_L[j], uniform_cone_pdf_omc(self.sun_omc[j])
             else:
                 w, pdf_dir[m] = self.env_sample(u_dir[m])
                 dm = -w
@@ -459,19 +578,29 @@ class LightSet:
             side[flip] = -1.0
             nn = na * side[:, None]
             w_local = sample_cosine_hemisphere(ud)
+            spread = np.zeros(len(i), bool)
+            spread[area_m] = ~self.ar_plain[i[area_m]]
+            if spread.any():                   # cosine-weighted inside the spread cone
+                j = i[spread]
+                w_local[spread] = sample_cosine_cone(ud[spread], np.sin(self.ar_half[j]))
+                att = area_spread.attenuation(w_local[spread, 2], self.ar_half[j], self.ar_k[j])
+                La[spread] *= att[:, None]
             t, b = coordinate_system(nn)
             dm = to_world(w_local, t, b, nn)
             cos[m] = w_local[:, 2]
             p[m], d[m], nl[m], Le[m] = pa, dm, na, La
             pdf_pos[m] = 1.0 / A
             pdf_dir[m] = w_local[:, 2] / np.pi * np.where(two, 0.5, 1.0)
+            if spread.any():
+                pdf_dir[np.flatnonzero(m)[spread]] = self._spread_pdf_dir(i[spread], w_local[spread, 2])
         pdf_pos = pdf_pos * sel
         denom = pdf_pos * pdf_dir
         ok = denom > 0
         beta = np.where(ok[:, None], Le * cos[:, None] / np.where(ok, denom, 1.0)[:, None], 0.0)
         is_inf = (kind == SUN) | (kind == ENV)
         return Emission(p, d, nl, Le, pdf_pos, pdf_dir, beta, light, kind,
-                        kind == POINT, kind == SUN, is_inf)
+                        (kind == POINT) & ~self._rows(kind == POINT, loc, self.pt_soft),
+                        (kind == SUN) & ~self._rows(kind == SUN, loc, self.sun_cone), is_inf)
 
     def pdf_emit(self, light: NDArray, p: NDArray, n: NDArray, d: NDArray) -> tuple[NDArray, NDArray]:
         """Densities with which :meth:`emit` produces (``p``, direction ``d``) on ``light``.
@@ -485,12 +614,17 @@ class LightSet:
         pdf_dir = np.zeros(len(light))
         m = kind == POINT
         if m.any():
-            cos_h = self.pt_cos[loc[m]]
-            inside = dot(self.pt_axis[loc[m]], d[m]) >= cos_h
-            pdf_dir[m] = np.where(cos_h > -1, inside / (2 * np.pi * (1 - cos_h)), _INV_4PI)
+            pdf_dir[m] = self._point_dir_pdf(loc[m], d[m])
+        soft = self._rows(m, loc, self.pt_soft)
+        pdf_pos[soft] = 1.0 / (np.pi * self.pt_radius[loc[soft]] ** 2)
         m = (kind == SUN) | (kind == ENV)
         pdf_pos[m] = 1.0 / (np.pi * self.radius**2)
         pdf_dir[kind == SUN] = 0.0
+        cone = self._rows(kind == SUN, loc, self.sun_cone)
+        if cone.any():
+            j = loc[cone]
+            inside = dot(self.sun_dir[j], d[cone]) >= 1.0 - self.sun_omc[j]
+            pdf_dir[cone] = inside * uniform_cone_pdf_omc(self.sun_omc[j])
         m = kind == ENV
         if m.any():
             pdf_dir[m] = self.env_pdf_dir(-d[m])       # d: direction of travel, −d toward the map
@@ -498,8 +632,78 @@ class LightSet:
         if m.any():
             pdf_pos[m] = 1.0 / self.ar_area[loc[m]]
             pdf_dir[m] = np.maximum(dot(n[m], d[m]), 0) / np.pi
+        spread = self._rows(m, loc, ~self.ar_plain)
+        if spread.any():
+            pdf_dir[spread] = self._spread_pdf_dir(loc[spread], dot(n[spread], d[spread]))
         m = kind == TRI
         if m.any():
             pdf_pos[m] = 1.0 / self.tri_area[loc[m]]
             pdf_dir[m] = np.abs(dot(n[m], d[m])) / np.pi * 0.5
         return pdf_pos * sel, pdf_dir
+
+    # ------------------------------------------------------------ helpers for the integrators
+    def emission_reaches(self, light: NDArray, p0: NDArray, x1: NDArray) -> NDArray:
+        """(N,) bool: light emitted by :meth:`emit` from ``p0`` on ``light`` lights its first
+        hit ``x1``. False only for soft-falloff (disk) point/spot lights whose line misses the
+        receiver's facing disk (:func:`.sphere_lights.reaches`); BDPT drops those subpaths."""
+        out = np.ones(len(light), bool)
+        kind, loc = self.kind[light], self.local[light]
+        m = self._rows(kind == POINT, loc, self.pt_soft & ~self.pt_sphere)
+        if m.any():
+            j = loc[m]
+            out[m] = sphere_lights.reaches(self.pt_pos[j], self.pt_radius[j], self.pt_sphere[j],
+                                           p0[m], x1[m])
+        return out
+
+    def chain_vertex(self, light: NDArray, p: NDArray) -> NDArray:
+        """(N, 3) light vertices as the ER chains store them: ``p``, except the centre of
+        point/spot lights — the chains' target function treats a light of radius r > 0 as
+        the point at its centre (the approximation is limited to where the VPLs go in the
+        light's penumbra; direct light and the rough BDPT image render the radius exactly)."""
+        kind = self.kind[light]
+        m = kind == POINT
+        if not m.any():
+            return p
+        out = p.copy()
+        out[m] = self.pt_pos[self.local[light[m]]]
+        return out
+
+    def area_radiance(self, i: NDArray, w_out: NDArray) -> NDArray:
+        """(N, 3) radiance of area lights ``i`` (local indices) along unit ``w_out`` leaving
+        them: L in front (× the spread attenuation), 0 behind."""
+        cos = dot(self.ar_n[i], w_out)
+        out = self.ar_L[i] * (cos > 0)[:, None]
+        spread = ~self.ar_plain[i]
+        if spread.any():
+            j = i[spread]
+            out[spread] *= area_spread.attenuation(cos[spread], self.ar_half[j], self.ar_k[j])[:, None]
+        return out
+
+    def pdf_illuminate_vertex(self, light: NDArray, x: NDArray, p: NDArray) -> NDArray:
+        """(N,) density with which :meth:`illuminate` from receivers ``x`` picks the light
+        vertex ``p`` of ``light``, in the vertex's own measure: area (area lights — the
+        reachable box of spread lights — and emissive triangles), counting (point, spot and
+        sun lights, as the ER chains store them) or solid angle (environment: ``p`` is then
+        the unit direction toward it); the selection pmf included."""
+        kind, loc = self.kind[light], self.local[light]
+        area = np.ones(len(light))
+        a, t = kind == AREA, kind == TRI
+        area[a] = self.ar_area[loc[a]]
+        area[t] = self.tri_area[loc[t]]
+        out = self.pmf(light) / area
+        spread = self._rows(a, loc, ~self.ar_plain)
+        if spread.any():
+            j = loc[spread]
+            lo, hi, ok = area_spread.clip_box(x[spread], self.ar_c[j], self.ar_u[j], self.ar_v[j],
+                                              self.ar_n[j], self.ar_half[j])
+            ab = area_spread.plane_coordinates(p[spread] - self.ar_c[j], self.ar_u[j], self.ar_v[j])
+            inside = ok & (ab >= lo).all(axis=1) & (ab <= hi).all(axis=1)
+            box = np.prod(hi - lo, axis=1) * np.linalg.norm(np.cross(self.ar_u[j], self.ar_v[j]), axis=1)
+            out[spread] = np.where(inside, self.pmf(light[spread]) / np.where(inside, box, 1.0), 0.0)
+        env = kind == ENV
+        if self.env_map is None:
+            out[env] /= 4 * np.pi                     # uniform sphere (kept bit-identical)
+        elif env.any():
+            out[env] *= self.env_pdf_dir(p[env])
+        return out
+

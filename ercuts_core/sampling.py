@@ -8,7 +8,9 @@ Every continuous warp comes as the pbrt-v4 triple (``util/sampling.h``)
   ``InvertUniformDiskConcentricSample``.
 * Cosine-weighted hemisphere by Malley's method (disk sample lifted to the hemisphere),
   pdf cosθ/π [PBR4 eq. A.15].
-* Uniform sphere / cone by inverting the cosθ marginal (pdf 1/(4π), 1/(2π(1 − cosθ_max))).
+* Uniform sphere / cone by inverting the cosθ marginal (pdf 1/(4π), 1/(2π(1 − cosθ_max)));
+  a cone given 1 − cosθ_max for tiny cones (sphere lights, the sun), a cosine-weighted cone
+  (area-light spread) and a regular polygon (aperture blades, Cycles ``regular_polygon_sample``).
 * Uniform triangle by the area-preserving "no sqrt" map of pbrt-v4 ``SampleUniformTriangle``
   [Heitz 2019, "A Low-Distortion Map Between Triangle and Square"].
 * Orthonormal basis from one vector, branchless [Duff et al. 2017, JCGT 6(1)].
@@ -266,6 +268,88 @@ def invert_uniform_cone_sample(w: ArrayLike, cos_max: ArrayLike) -> F64:
     cos_max = np.broadcast_to(np.asarray(cos_max, np.float64), w[:, 0].shape)
     u0 = np.clip(_safe_div(1.0 - w[:, 2], 1.0 - cos_max), 0.0, 1.0)
     return np.stack([u0, _phi_01(w)], axis=1)
+
+
+def sample_uniform_cone_omc(u: ArrayLike, one_minus_cos: ArrayLike) -> F64:
+    """Uniform directions in the cone about +z given 1 − cosθ_max (precise for tiny cones).
+
+    1 − cosθ = u₀·(1 − cosθ_max), so sin²θ = u₀·m·(2 − u₀·m) keeps full precision when
+    m = 1 − cosθ_max ≪ 1 (Cycles ``sample_uniform_cone`` takes 1 − cos for the same reason).
+    Density 1/(2π·m) = :func:`uniform_cone_pdf_omc`.
+
+    Args:
+        u: (N, 2) uniforms; one_minus_cos: (N,) or scalar in (0, 2].
+    Returns:
+        (N, 3) unit directions.
+    """
+    u = _as2(u)
+    m = np.broadcast_to(np.asarray(one_minus_cos, np.float64), u[:, 0].shape)
+    a = u[:, 0] * m
+    sin_t = _safe_sqrt(a * (2.0 - a))
+    phi = 2.0 * PI * u[:, 1]
+    return np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), 1.0 - a], axis=1)
+
+
+def uniform_cone_pdf_omc(one_minus_cos: ArrayLike) -> F64:
+    """Solid-angle pdf of :func:`sample_uniform_cone_omc`: 1/(2π·(1 − cosθ_max)) [sr⁻¹]."""
+    return INV_2PI / np.asarray(one_minus_cos, np.float64)
+
+
+def one_minus_cos_from_sin2(sin2: ArrayLike) -> F64:
+    """1 − √(1 − s) for s = sin²θ in [0, 1], as s/(1 + √(1 − s)) (no cancellation)."""
+    s = np.clip(np.asarray(sin2, np.float64), 0.0, 1.0)
+    return s / (1.0 + np.sqrt(1.0 - s))
+
+
+def sample_cosine_cone(u: ArrayLike, sin_max: ArrayLike) -> F64:
+    """Cosine-weighted directions about +z restricted to θ ≤ θ_max (Malley's method on the
+    disk of radius sinθ_max). Density cosθ/(π·sin²θ_max) inside the cone, 0 outside.
+
+    Args:
+        u: (N, 2) uniforms; sin_max: (N,) or scalar sinθ_max in (0, 1].
+    Returns:
+        (N, 3) unit directions.
+    """
+    u = _as2(u)
+    d = sample_uniform_disk_concentric(u) * np.asarray(sin_max, np.float64).reshape(-1, 1)
+    z = _safe_sqrt(1.0 - d[:, 0] ** 2 - d[:, 1] ** 2)
+    return np.stack([d[:, 0], d[:, 1], z], axis=1)
+
+
+def cosine_cone_pdf(cos_theta: ArrayLike, cos_max: ArrayLike, sin_max: ArrayLike) -> F64:
+    """Solid-angle pdf of :func:`sample_cosine_cone` at cosθ: cosθ/(π·sin²θ_max) for
+    cosθ ≥ cosθ_max, else 0."""
+    c = np.asarray(cos_theta, np.float64)
+    s2 = np.asarray(sin_max, np.float64) ** 2
+    return np.where(c >= np.asarray(cos_max, np.float64), np.maximum(c, 0.0) * INV_PI / s2, 0.0)
+
+
+def sample_regular_polygon(u: ArrayLike, corners: int, rotation: float) -> F64:
+    """Uniform points in the regular polygon with ``corners`` vertices on the unit circle,
+    rotated by ``rotation`` [rad] (Cycles ``regular_polygon_sample``: a corner triangle
+    chosen by u₀, a uniform point in it). Area corners·sin(π/c)·cos(π/c).
+
+    Args:
+        u: (N, 2) uniforms; corners >= 3.
+    Returns:
+        (N, 2) points.
+    """
+    u = _as2(u)
+    c = float(corners)
+    corner = np.floor(u[:, 0] * c)
+    a = np.sqrt(u[:, 0] * c - corner)
+    v = u[:, 1] * a
+    w = 1.0 - a
+    angle = PI / c
+    px, py = (w + v) * np.cos(angle), (w - v) * np.sin(angle)
+    rot = rotation + corner * 2.0 * angle
+    cr, sr = np.cos(rot), np.sin(rot)
+    return np.stack([cr * px - sr * py, sr * px + cr * py], axis=1)
+
+
+def regular_polygon_area(corners: int) -> float:
+    """Area of the unit-circumradius regular polygon of :func:`sample_regular_polygon`."""
+    return corners * np.sin(PI / corners) * np.cos(PI / corners)
 
 
 # ---------------------------------------------------------------------------------------

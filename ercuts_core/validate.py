@@ -12,12 +12,13 @@ Policy (shared docs, style-and-testing.md §2.6, after BlendLuxCore's rule):
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
-from .description import (AreaLights, MaterialTable, MeshTable, PointLights, SceneDescription, SunLights,
-                          WorldMap)
+from .description import (AreaLights, CameraDesc, MaterialTable, MeshTable, PointLights, SceneDescription,
+                          SunLights, WorldMap)
 from .sampling import luminance
 from .shading.program import compile_program
 from .shading.textures import TextureTable, missing_image
@@ -251,6 +252,38 @@ def _finite_rows(desc, arrays, object_ids, kind, issues) -> np.ndarray:
     return ok
 
 
+#: Smallest area-light spread rendered [rad] (1°, Cycles 3.x's minimum; see _clean_spread).
+MIN_SPREAD = np.radians(1.0)
+
+
+def _clean_size(desc, values, object_ids, what: str, hi: float, issues: list[Issue]) -> np.ndarray:
+    """A light size parameter (point radius, sun angle) with NaN/Inf or negative values set
+    to 0 (a point / a delta direction), one warning per light; values above ``hi`` clipped."""
+    v = np.asarray(values, np.float64)
+    bad = ~(v >= 0) | ~np.isfinite(v)
+    for name in _names(desc, object_ids[bad]):
+        issues.append(Issue("warning", "bad_light_size",
+                            f"Light '{name}': {what} is NaN, Inf or negative; rendered as 0 (sharp shadows)",
+                            name))
+    return np.clip(np.where(bad, 0.0, v), 0.0, hi)
+
+
+def _clean_spread(desc, al: AreaLights, issues: list[Issue]) -> np.ndarray:
+    """Area-light spread in [1°, π]: NaN/negative → π (no spread), below 1° → 1° (Cycles 3.x
+    clamps there; Cycles ≥ 4.0 renders 0° as a collimated beam, which the core has no delta
+    for), one warning per light."""
+    v = np.asarray(al.spread, np.float64)
+    bad = ~np.isfinite(v) | (v < 0)
+    small = ~bad & (v < MIN_SPREAD)
+    for name in _names(desc, al.object_ids[bad]):
+        issues.append(Issue("warning", "bad_light_spread",
+                            f"Light '{name}': spread is NaN, Inf or negative; rendered as 180°", name))
+    for name in _names(desc, al.object_ids[small]):
+        issues.append(Issue("warning", "small_light_spread",
+                            f"Light '{name}': spread below 1° rendered as 1°", name))
+    return np.clip(np.where(bad, np.pi, v), MIN_SPREAD, np.pi)
+
+
 def _clean_lights(desc, issues, stats):
     pl, sl, al = desc.point_lights, desc.sun_lights, desc.area_lights
     ok = _finite_rows(desc, [pl.position, pl.intensity, pl.direction, pl.cos_half_angle, pl.blend],
@@ -258,13 +291,16 @@ def _clean_lights(desc, issues, stats):
     # A spot with a zero cone (cos of the half-angle ≥ 1) emits nothing, like zero intensity.
     on = ok & (luminance(np.maximum(pl.intensity, 0)) > 0) & (pl.cos_half_angle < 1.0)
     stats["dropped_zero_lights"] = int((ok & ~on).sum())
+    radius = _clean_size(desc, pl.radius[on], pl.object_ids[on], "radius", np.inf, issues)
     pl = PointLights(pl.position[on], np.maximum(pl.intensity[on], 0), pl.direction[on],
-                     pl.cos_half_angle[on], np.clip(pl.blend[on], 0, 1), pl.radius[on], pl.object_ids[on])
+                     pl.cos_half_angle[on], np.clip(pl.blend[on], 0, 1), radius, pl.object_ids[on],
+                     pl.sphere[on])
     ok = _finite_rows(desc, [sl.direction, sl.irradiance], sl.object_ids, "sun", issues)
     on = ok & (luminance(np.maximum(sl.irradiance, 0)) > 0) & (np.linalg.norm(sl.direction, axis=1) > 0)
     stats["dropped_zero_lights"] += int((ok & ~on).sum())
     d = sl.direction[on] / np.linalg.norm(sl.direction[on], axis=1, keepdims=True)
-    sl = SunLights(d, np.maximum(sl.irradiance[on], 0), sl.angle[on], sl.object_ids[on])
+    angle = _clean_size(desc, sl.angle[on], sl.object_ids[on], "angle", np.pi, issues)
+    sl = SunLights(d, np.maximum(sl.irradiance[on], 0), angle, sl.object_ids[on])
     ok = _finite_rows(desc, [al.center, al.axis_u, al.axis_v, al.normal, al.radiance],
                       al.object_ids, "area", issues)
     with np.errstate(over="ignore", invalid="ignore"):    # non-finite rows are dropped by `ok`
@@ -272,9 +308,43 @@ def _clean_lights(desc, issues, stats):
     on = ok & (luminance(np.maximum(al.radiance, 0)) > 0) & (area > 0) & (np.linalg.norm(al.normal, axis=1) > 0)
     stats["dropped_zero_lights"] += int((ok & ~on).sum())
     n = al.normal[on] / np.linalg.norm(al.normal[on], axis=1, keepdims=True)
+    spread = _clean_spread(desc, al, issues)[on]
     al = AreaLights(al.center[on], al.axis_u[on], al.axis_v[on], n, np.maximum(al.radiance[on], 0),
-                    al.shape[on], al.object_ids[on])
+                    al.shape[on], al.object_ids[on], spread)
     return pl, sl, al
+
+
+def _clean_lens(cam: CameraDesc, issues: list[Issue]) -> CameraDesc:
+    """The camera's thin-lens parameters: NaN/Inf or negative aperture → a pinhole, a bad focus
+    distance → a pinhole, a bad ratio → 1, negative blades → a disk, one warning each; depth
+    of field on an orthographic camera is not supported (pinhole, warning); the focus distance
+    is at least 10⁻⁵ m (as Cycles)."""
+    r, f, ratio = cam.aperture_radius, cam.focus_distance, cam.aperture_ratio
+    fixes = {}
+    if not (np.isfinite(r) and r >= 0):
+        issues.append(Issue("warning", "bad_aperture", "Camera: aperture is NaN, Inf or negative; "
+                                                       "depth of field off"))
+        r = 0.0
+    if r > 0 and not (np.isfinite(f) and f >= 0):
+        issues.append(Issue("warning", "bad_focus", "Camera: focus distance is NaN, Inf or negative; "
+                                                    "depth of field off"))
+        r = 0.0
+    if r > 0 and cam.projection == "ORTHO":
+        issues.append(Issue("warning", "ortho_dof", "Camera: depth of field of orthographic cameras "
+                                                    "is not supported; rendered sharp"))
+        r = 0.0
+    if not (np.isfinite(ratio) and ratio > 0):
+        issues.append(Issue("warning", "bad_aperture_ratio", "Camera: aperture ratio is NaN, Inf or "
+                                                             "not positive; using 1"))
+        fixes["aperture_ratio"] = 1.0
+    if not np.isfinite(cam.aperture_rotation):
+        fixes["aperture_rotation"] = 0.0
+    if cam.aperture_blades < 3:
+        fixes["aperture_blades"] = 0
+    fixes["aperture_radius"] = r
+    if r > 0:
+        fixes["focus_distance"] = max(f, 1e-5)
+    return dataclasses.replace(cam, **fixes)
 
 
 def _clean_world_map(desc: SceneDescription, issues: list[Issue]) -> WorldMap | None:
@@ -340,7 +410,7 @@ def sanitize(desc: SceneDescription) -> Validated:
         issues.append(Issue("warning", "nonfinite_world", "World: NaN/Inf background colour, rendered black"))
     textures = _clean_textures(desc.textures, issues)
     clean = desc.replace(mesh=mesh, materials=mats, point_lights=pl, sun_lights=sl, area_lights=al,
-                         world_radiance=world, textures=textures)
+                         world_radiance=world, textures=textures, camera=_clean_lens(desc.camera, issues))
     if not has_emitters(clean):
         issues.append(Issue("warning", "no_lights",
                             "Scene has no lights (or all lights have zero power): the image is black"))

@@ -52,3 +52,33 @@ def test_npz_round_trip_with_lights_border_and_normals(tmp_path):
 def test_save_is_atomic_and_leaves_no_temp_files(tmp_path):
     save_npz(cornell_box(), tmp_path / "a.npz")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.npz"]
+
+
+def test_npz_round_trip_with_soft_lights_and_depth_of_field(tmp_path):
+    """Light radius and shape, sun angle, area spread and the thin-lens fields survive the
+    round trip; a file written before they existed loads with their defaults."""
+    from ercuts_core import AreaLights, PointLights, SunLights
+
+    d = point_lit_box()
+    pl = d.point_lights
+    pts = PointLights(pl.position, pl.intensity, pl.direction, pl.cos_half_angle, pl.blend,
+                      [0.1, 0.25], pl.object_ids, [True, False])
+    suns = SunLights([[0, -1, 0]], [[2, 2, 2]], [0.05], [0])
+    areas = AreaLights([[0, 1.9, 0]], [[0.2, 0, 0]], [[0, 0, 0.2]], [[0, -1, 0]], [[5, 5, 5]], [1], [0],
+                       [0.7])
+    cam = d.camera.__class__(**{**vars(d.camera), "aperture_radius": 0.02, "focus_distance": 1.7,
+                                "aperture_blades": 5, "aperture_rotation": 0.3, "aperture_ratio": 1.4})
+    d = d.replace(point_lights=pts, sun_lights=suns, area_lights=areas, camera=cam)
+    save_npz(d, tmp_path / "soft.npz")
+    back = load_npz(tmp_path / "soft.npz")
+    _assert_same(d, back)
+    assert back.point_lights.sphere.tolist() == [True, False] and back.camera.aperture_blades == 5
+    # An old file: no sphere/spread/lens keys
+    with np.load(tmp_path / "soft.npz") as z:
+        old = {k: z[k] for k in z.files if not k.endswith((".sphere", ".spread")) and "aperture" not in k
+               and "focus" not in k}
+    np.savez(tmp_path / "old.npz", **old)
+    o = load_npz(tmp_path / "old.npz")
+    assert o.point_lights.sphere.tolist() == [False, False]
+    np.testing.assert_allclose(o.area_lights.spread, np.float32(np.pi))
+    assert o.camera.aperture_radius == 0.0 and o.camera.focus_distance == 10.0

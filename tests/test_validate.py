@@ -153,3 +153,50 @@ def test_nonfinite_material_values_warn_and_never_emit():
 def test_nonfinite_world_warns_and_renders_black_background():
     v = sanitize(scene(world_radiance=[np.inf, 0.0, np.nan]))
     assert "nonfinite_world" in codes(v) and (v.desc.world_radiance == 0).all()
+
+
+def test_bad_light_sizes_warn_and_fall_back():
+    """NaN or negative radius / sun angle → 0 (sharp), one warning naming the light; a NaN or
+    negative spread → 180°, a spread below 1° → 1° (Cycles 3.x's minimum)."""
+    from ercuts_core import SunLights
+
+    d = scene(lights=False)
+    pl = PointLights([[0, 1, 0]] * 3, [[1, 1, 1]] * 3, [[0, -1, 0]] * 3, [-1] * 3, [0] * 3,
+                     [np.nan, -0.2, 0.3], [2, 2, 2])
+    sl = SunLights([[0, -1, 0]] * 2, [[1, 1, 1]] * 2, [np.inf, 0.02], [2, 2])
+    al = AreaLights([[0, 1, 0]] * 3, [[0.1, 0, 0]] * 3, [[0, 0, 0.1]] * 3, [[0, -1, 0]] * 3, [[5, 5, 5]] * 3,
+                    [0] * 3, [2, 2, 2], [np.nan, 0.001, 1.0])
+    v = sanitize(d.replace(point_lights=pl, sun_lights=sl, area_lights=al))
+    assert codes(v).count("bad_light_size") == 2             # one per light object (all 'Lamp')
+    assert "bad_light_spread" in codes(v) and "small_light_spread" in codes(v)
+    assert all("'Lamp'" in i.message for i in v.issues)
+    np.testing.assert_allclose(v.desc.point_lights.radius, [0, 0, 0.3], rtol=1e-6)
+    np.testing.assert_allclose(v.desc.sun_lights.angle, [0, 0.02], rtol=1e-6)
+    np.testing.assert_allclose(v.desc.area_lights.spread, [np.pi, np.radians(1), 1.0], rtol=1e-6)
+
+
+@pytest.mark.parametrize("field, value, code", [
+    ("aperture_radius", np.nan, "bad_aperture"), ("aperture_radius", -1.0, "bad_aperture"),
+    ("focus_distance", np.nan, "bad_focus"), ("aperture_ratio", 0.0, "bad_aperture_ratio"),
+])
+def test_bad_lens_values_warn_and_fall_back(field, value, code):
+    import dataclasses
+
+    d = scene()
+    cam = dataclasses.replace(d.camera, **{"aperture_radius": 0.05, field: value})
+    v = sanitize(d.replace(camera=cam))
+    assert code in codes(v)
+    c = v.desc.camera
+    if code == "bad_aperture_ratio":
+        assert c.aperture_ratio == 1.0 and c.aperture_radius == 0.05
+    else:
+        assert c.aperture_radius == 0.0                      # a pinhole
+    assert np.isfinite(render(v.desc, RenderSettings(integrator="PATH", samples=1)).image).all()
+
+
+def test_orthographic_depth_of_field_warns_and_renders_sharp():
+    import dataclasses
+
+    d = scene()
+    v = sanitize(d.replace(camera=dataclasses.replace(d.camera, projection="ORTHO", aperture_radius=0.1)))
+    assert "ortho_dof" in codes(v) and v.desc.camera.aperture_radius == 0.0

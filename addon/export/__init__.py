@@ -149,7 +149,8 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
             continue
         if ob.type == "LIGHT":
             names.append(_instance_name(inst))
-            lights.add(ob.data, _relative(inst.matrix_world, origin), len(names) - 1, ob.name)
+            lights.add(ob.data, _relative(inst.matrix_world, origin), len(names) - 1, ob.name,
+                       visible_camera=bool(getattr(ob, "visible_camera", False)))
             continue
         if ob.type not in GEOMETRY_TYPES or not inst.show_self:
             continue

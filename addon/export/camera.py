@@ -3,6 +3,11 @@
 The core derives the image window exactly like Blender's ``Camera.view_frame()``
 (sensor fit, shift, pixel aspect), so this module only copies parameters. The camera
 matrix is handed over with its scale removed (rotation + translation).
+
+Depth of field follows Cycles' ``blender/camera.cpp``: aperture radius = lens·10⁻³/(2·f-stop)
+(f-stop at least 10⁻⁵), the focus distance, or with a focus object (and bone) the distance
+between it and the camera along the camera's view axis; blades, rotation and ratio as set.
+Orthographic depth of field is not supported (warning, rendered sharp).
 """
 from __future__ import annotations
 
@@ -51,8 +56,7 @@ def camera_desc(scene, camera_object, size: tuple[int, int] | None = None,
     render = scene.render
     width, height = size if size is not None else render_size(render)
     warnings = []
-    if getattr(cam, "dof", None) is not None and cam.dof.use_dof:
-        warnings.append(f"Camera '{camera_object.name}': depth of field ignored")
+    lens = _lens(camera_object, warnings)
     if use_border is None:
         use_border = bool(render.use_border)
     desc = CameraDesc(
@@ -71,5 +75,39 @@ def camera_desc(scene, camera_object, size: tuple[int, int] | None = None,
                 float(render.border_max_x), float(render.border_max_y)),
         use_border=use_border,
         clip_start=float(cam.clip_start), clip_end=float(cam.clip_end),
+        **lens,
     )
     return desc, warnings
+
+
+def _lens(camera_object, warnings: list[str]) -> dict:
+    """The CameraDesc thin-lens fields of a camera object (empty without depth of field)."""
+    cam = camera_object.data
+    dof = getattr(cam, "dof", None)
+    if dof is None or not dof.use_dof:
+        return {}
+    if cam.type == "ORTHO":
+        warnings.append(f"Camera '{camera_object.name}': orthographic depth of field is not "
+                        "supported; rendered sharp")
+        return {}
+    return dict(aperture_radius=float(cam.lens) * 1e-3 / (2.0 * max(float(dof.aperture_fstop), 1e-5)),
+                focus_distance=focus_distance(camera_object),
+                aperture_blades=int(dof.aperture_blades), aperture_rotation=float(dof.aperture_rotation),
+                aperture_ratio=float(dof.aperture_ratio))
+
+
+def focus_distance(camera_object) -> float:
+    """Cycles ``blender_camera_focal_distance``: ``dof.focus_distance``, or with a focus object
+    |view axis · (camera − target)|, the target being the object's origin or the head of its
+    ``focus_subtarget`` bone."""
+    dof = camera_object.data.dof
+    target = dof.focus_object
+    if target is None:
+        return float(dof.focus_distance)
+    m = np.array(target.matrix_world, np.float64)
+    bone = getattr(dof, "focus_subtarget", "")
+    pose = getattr(target, "pose", None)
+    if bone and pose is not None and bone in pose.bones:
+        m = m @ np.array(pose.bones[bone].matrix, np.float64)
+    cam = rigid(camera_object.matrix_world)
+    return float(abs(cam[:3, 2] @ (cam[:3, 3] - m[:3, 3])))

@@ -4,8 +4,11 @@ Conversions (shared docs ``blender.md`` §2.3, measured with Cycles on 3.4.1 and
 
 * rgb = colour · temperature tint · power · 2^exposure (· light-node Emission colour·strength)
 * point/spot: radiant intensity I = rgb/(4π) W/sr (spot power is *not* concentrated
-  into the cone); spot half-angle = spot_size/2, smoothstep blend = spot_blend
-* sun: irradiance E = rgb W/m² travelling along the light's local −Z
+  into the cone; without ``normalize`` see :func:`..compat.point_light_intensity_scale`);
+  spot half-angle = spot_size/2, smoothstep blend = spot_blend; radius = shadow_soft_size,
+  a sphere when Soft Falloff is off (≥ 4.0), else the disk facing the receiver
+* sun: irradiance E = rgb W/m² travelling along the light's local −Z, angle = its angular
+  diameter
 * area: radiance L = rgb/(π·A) (≥ 4.0), rgb/(4·A) (3.x), rgb/π without ``normalize``;
   A includes the object scale; SQUARE/RECTANGLE → rectangle, DISK/ELLIPSE → ellipse;
   emits along local −Z
@@ -34,10 +37,16 @@ class LightCollector:
         self.areas: list[dict] = []
         self.warnings: list[str] = []
 
-    def add(self, light, matrix: np.ndarray, object_id: int, name: str) -> None:
-        """Add one light instance with its 4×4 world matrix."""
+    def add(self, light, matrix: np.ndarray, object_id: int, name: str,
+            visible_camera: bool = False) -> None:
+        """Add one light instance with its 4×4 world matrix; ``visible_camera``: the object's
+        Ray Visibility > Camera (off by default for lights)."""
         m = np.asarray(matrix, np.float64)
         rgb = self.light_rgb(light, name)
+        sized = light.type == "AREA" or (light.type in {"POINT", "SPOT"} and light.shadow_soft_size > 0)
+        if visible_camera and sized:
+            self.warnings.append(f"Light '{name}': visible to the camera in Cycles (Ray Visibility > "
+                                 "Camera); Ercuts does not show lights seen directly, only their light")
         position = m[:3, 3]
         down = _unit(m[:3, :3] @ np.array([0.0, 0.0, -1.0]))  # local −Z in the world
         kind = light.type
@@ -50,16 +59,17 @@ class LightCollector:
                     "Ercuts renders the Blender 4+ spot (no cosine), brighter off-axis")
             self.points.append(dict(
                 position=position,
-                intensity=rgb / (4.0 * math.pi),
+                intensity=rgb * compat.point_light_intensity_scale(light),
                 direction=down,
                 cos_half_angle=math.cos(light.spot_size / 2.0) if spot else -1.0,
                 blend=float(light.spot_blend) if spot else 0.0,
                 radius=float(light.shadow_soft_size),
                 object_id=object_id,
+                sphere=compat.point_light_is_sphere(light),
             ))
         elif kind == "SUN":
-            self.suns.append(dict(direction=down, irradiance=rgb, angle=float(light.angle),
-                                  object_id=object_id))
+            self.suns.append(dict(direction=down, irradiance=rgb * compat.sun_irradiance_scale(light),
+                                  angle=float(light.angle), object_id=object_id))
         elif kind == "AREA":
             self._add_area(light, m, rgb, object_id, name)
         else:
@@ -78,8 +88,6 @@ class LightCollector:
         if area <= 0.0:
             self.warnings.append(f"Light '{name}': area light of zero size ignored")
             return
-        if getattr(light, "spread", math.pi) < math.pi - 1e-6:
-            self.warnings.append(f"Light '{name}': area light spread ignored (rendered as 180°)")
         from ercuts_core.description import SHAPE_ELLIPSE, SHAPE_RECT
 
         self.areas.append(dict(
@@ -90,6 +98,7 @@ class LightCollector:
             radiance=rgb * compat.area_light_radiance_scale(light, area),
             shape=SHAPE_ELLIPSE if ellipse else SHAPE_RECT,
             object_id=object_id,
+            spread=float(getattr(light, "spread", math.pi)),
         ))
 
     def light_rgb(self, light, name: str) -> np.ndarray:
@@ -127,7 +136,8 @@ class LightCollector:
             position=col(p, "position", (-1, 3)), intensity=col(p, "intensity", (-1, 3)),
             direction=col(p, "direction", (-1, 3)), cos_half_angle=col(p, "cos_half_angle", (-1,)),
             blend=col(p, "blend", (-1,)), radius=col(p, "radius", (-1,)),
-            object_ids=np.array([r["object_id"] for r in p], np.int32))
+            object_ids=np.array([r["object_id"] for r in p], np.int32),
+            sphere=np.array([r["sphere"] for r in p], bool))
         suns = SunLights(
             direction=col(s, "direction", (-1, 3)), irradiance=col(s, "irradiance", (-1, 3)),
             angle=col(s, "angle", (-1,)), object_ids=np.array([r["object_id"] for r in s], np.int32))
@@ -136,5 +146,6 @@ class LightCollector:
             axis_v=col(a, "axis_v", (-1, 3)), normal=col(a, "normal", (-1, 3)),
             radiance=col(a, "radiance", (-1, 3)),
             shape=np.array([r["shape"] for r in a], np.int32),
-            object_ids=np.array([r["object_id"] for r in a], np.int32))
+            object_ids=np.array([r["object_id"] for r in a], np.int32),
+            spread=col(a, "spread", (-1,)))
         return points, suns, areas

@@ -153,11 +153,12 @@ class Integrator:
         self.window = scene.camera.window
 
     def camera_rays(self, pix: NDArray, rng: np.random.Generator) -> tuple[NDArray, NDArray]:
-        """Jittered rays through window pixels ``pix`` (N,) (box filter)."""
+        """Jittered rays through window pixels ``pix`` (N,) (box filter; a lens point each
+        with depth of field)."""
         w = self.window
         raster = w.raster(pix).astype(np.float64)
         raster += rng.random((len(pix), 2))
-        return self.camera.generate_rays(raster)
+        return self.camera.generate_rays(raster, self.camera.lens_samples(rng, len(pix)))
 
     def record_first_hit(self, film: Film, pix: NDArray, keep: NDArray, surf: Surface | None,
                          bsdf: "Bsdf | None") -> None:

@@ -34,7 +34,10 @@ Conventions shared with the path tracer (:mod:`.path`, the oracle):
 * ``max_depth`` = number of scattering vertices; Russian roulette from ``rr_depth`` on
   both subpaths (camera: survival min(1, max β) as in PATH; light: min(1, max β/max β₀),
   relative to the emitted throughput, since light-subpath β carries the light's power).
-* Lights (:mod:`..lights`): POINT/SUN are delta lights; AREA lights cannot be hit by rays,
+* Lights (:mod:`..lights`): POINT/SUN are delta lights (or, with a radius or an angle,
+  soft lights whose emission densities :meth:`LightSet.illuminate` reports for the s = 1
+  MIS weights; a soft-falloff light's subpath is dropped when its first hit is not lit,
+  :meth:`LightSet.emission_reaches`); they and AREA lights cannot be hit by rays,
   so the s = 0 strategy does not exist for them and they are excluded from that MIS
   term exactly like delta lights. SUN/ENV light subpaths start on a disk of radius R
   (the scene's bounding sphere); as in pbrt-v3 the *direction* density (incl. selection)
@@ -43,8 +46,10 @@ Conventions shared with the path tracer (:mod:`.path`, the oracle):
 * Camera: the camera ray density for one sample spread over the rendered window
   (``Camera.pdf_area``) is the camera strategy's density; with one light subpath per
   camera sample, this is the matching normalization for the per-pixel splat importance
-  of ``Camera.connect`` [pbrt-v3 PerspectiveCamera::Pdf_We / We]. Orthographic cameras
-  are delta in direction: no t = 1 strategy.
+  of ``Camera.connect`` [pbrt-v3 PerspectiveCamera::Pdf_We / We]. With depth of field the
+  camera vertex is a lens point (camera rays and t = 1 connections each draw one; the
+  densities keep their pinhole form, :mod:`..camera`). Orthographic cameras are delta in
+  direction: no t = 1 strategy.
 * Shading normals: light-subpath vertices use Veach's adjoint correction
   |wo·ns||wi·ng| / (|wo·ng||wi·ns|) (pbrt-v3 ``CorrectShadingNormal``, Importance mode);
   connection cosines use the shading normal, densities the geometric normal.
@@ -133,12 +138,14 @@ class Connection:
     """A group of R sampled paths (unoccluded, MIS-weighted contribution w·C ≠ 0) of one
     batch: lane, s and t (R,) each; ``e`` (R,) Y(w·C) in image units (t = 1 rows divided by
     the number of window pixels, as their splats are, so Σe estimates the image energy);
-    ``light_sample`` for s = 1 rows, ``raster`` (R, 2) for t = 1 rows."""
+    ``light_sample`` for s = 1 rows, ``raster`` (R, 2) and ``eye`` (R, 3) (the camera point
+    connected to: the pinhole or a lens point) for t = 1 rows."""
 
     def __init__(self, lane: NDArray, s: NDArray, t: NDArray, e: NDArray,
-                 light_sample: LightSample | None = None, raster: NDArray | None = None):
+                 light_sample: LightSample | None = None, raster: NDArray | None = None,
+                 eye: NDArray | None = None):
         self.lane, self.s, self.t, self.e = lane, s, t, e
-        self.light_sample, self.raster = light_sample, raster
+        self.light_sample, self.raster, self.eye = light_sample, raster, eye
 
 
 class VertexRows:
@@ -285,7 +292,7 @@ class BDPTIntegrator(Integrator):
                                  *self._connect_vertices(cam, lig, no_s0, lane, s, t))
             if not self.camera.is_delta_direction:
                 for lane, s, t in self._rows_t1(lig).chunks(self.max_rows):
-                    self._connect_camera(film, lig, no_s0, lane, s, t)
+                    self._connect_camera(film, lig, no_s0, lane, s, t, rng)
         film.add_samples(pix, L.sum(axis=0), alpha, parts=L)
         if self.on_connections is not None:
             self.on_connections(cam, lig, self._pending)
@@ -326,7 +333,7 @@ class BDPTIntegrator(Integrator):
         w = self.window
         cam.raster = w.raster(pix).astype(np.float64)
         cam.raster += rng.random((n, 2))
-        o, d = self.camera.generate_rays(cam.raster)
+        o, d = self.camera.generate_rays(cam.raster, self.camera.lens_samples(rng, n))
         cam.p[0] = o
         cam.beta[0] = 1.0
         alpha = self._random_walk(cam, np.arange(n), o, d, np.ones((n, 3)), np.zeros(n),
@@ -364,6 +371,8 @@ class BDPTIntegrator(Integrator):
             o = np.where(on_surf[:, None], tracer.offset(p, nl, d), p)
             self._random_walk(lig, lanes, o, d, e.beta[lanes], e.pdf_dir[lanes], rng,
                               importance=True)
+            hit = lanes[lig.count[lanes] > 1]        # soft-falloff lights light a subset
+            lig.count[hit[~lights.emission_reaches(e.light[hit], e.p[hit], lig.p[1, hit])]] = 1
         return lig, no_s0
 
     def _random_walk(self, path: Subpaths, lanes: NDArray, o: NDArray, d: NDArray,
@@ -680,11 +689,11 @@ class BDPTIntegrator(Integrator):
         return idx[vis], (c * wgt[:, None])[vis]
 
     def _connect_camera(self, film: Film, lig: Subpaths, no_s0: NDArray, lane: NDArray,
-                        s: NDArray, t: NDArray) -> None:
-        """t = 1: connect light vertex s−1 to the camera and splat (light tracing)."""
+                        s: NDArray, t: NDArray, rng: np.random.Generator) -> None:
+        """t = 1: connect light vertex s−1 to the camera (a lens point) and splat (light tracing)."""
         camera = self.camera
         qs = lig.rows(s - 1, lane)
-        conn = camera.connect(qs.p)
+        conn = camera.connect(qs.p, camera.lens_samples(rng, len(lane)))
         # In the view, and leaving on the side the light path arrived from (else f = 0)
         idx = np.flatnonzero(conn.valid & (dot(qs.wo, qs.ng) * dot(conn.wi, qs.ng) > 0))
         if len(idx) == 0:
@@ -693,7 +702,7 @@ class BDPTIntegrator(Integrator):
         k = s - 1
         p, ng, ns, wo = qs.p, qs.ng, qs.ns, qs.wo
         wi, factor = conn.wi[idx], conn.factor[idx]
-        raster, dist = conn.raster[idx], conn.dist[idx]
+        raster, dist, eye = conn.raster[idx], conn.dist[idx], conn.origin[idx]
         bsdf = self.scene.bsdf(lig.at("mat", k, lane), ns, ng, p)
         # One evaluation toward the light vertex's predecessor gives f (wi: the camera
         # side, wo: the light side, as on camera paths) and the reverse density for MIS.
@@ -705,18 +714,18 @@ class BDPTIntegrator(Integrator):
         if len(keep) == 0:
             return
         lane, s, t, k, c, p, ng, wo, wi = (a[keep] for a in (lane, s, t, k, c, p, ng, wo, wi))
-        raster, dist = raster[keep], dist[keep]
+        raster, dist, eye = raster[keep], dist[keep], eye[keep]
         # The camera strategy's density of this vertex: one camera sample over the window
         qs_rev = camera.pdf_area(-wi, dist, dot(ng, wi))
         qsm_rev = pdf_rev[keep] * qs.g_prev[keep]
         w = self._mis_weight(None, lig, lane, s, t, None, None, qs_rev=qs_rev, qsm_rev=qsm_rev,
                              qs_fwd=lig.at("pdf_fwd", k, lane), no_s0=no_s0[lane])
-        vis = self.scene.tracer.visible(p, ng, np.broadcast_to(camera.position, p.shape), None)
+        vis = self.scene.tracer.visible(p, ng, np.ascontiguousarray(eye), None)
         raster, c, s, t = raster[vis], (c * w[:, None])[vis], s[vis], t[vis]
         film.add_splats(raster, c, path_class(s + t - 2))
         if self.on_connections is not None:
             self._pending.append(Connection(lane[vis], s, t, luminance(c) / self.window.n_pixels,
-                                            raster=raster))
+                                            raster=raster, eye=eye[vis]))
         if self.strategy_images is not None and len(c):
             win = self.window
             pix, ok = win.pixel(raster)

@@ -317,6 +317,39 @@ def test_area_light_exposure_and_normalize():
     assert np.allclose(al.radiance[0], 2 * 10 / math.pi)
 
 
+def test_soft_light_shapes_follow_soft_falloff_and_spread_is_exported():
+    """Radius > 0: a sphere when Soft Falloff is off (Blender ≥ 4.0), else (the default, and
+    every 3.x) the disk facing the receiver; area spread and sun angle as set."""
+    soft = h.light("POINT", name="Soft", energy=10.0, shadow_soft_size=0.3)
+    hard = h.light("SPOT", name="Hard", energy=10.0, shadow_soft_size=0.3)
+    if V >= (4, 0, 0):
+        assert hard.data.use_soft_falloff                          # Blender's default
+        hard.data.use_soft_falloff = False
+    h.light("AREA", energy=10.0, size=1.0, spread=math.radians(40))
+    exported = _lights()
+    pl = exported.description.point_lights
+    names = [exported.description.object_name(int(i)) for i in pl.object_ids]
+    sphere = dict(zip(names, pl.sphere.tolist()))
+    assert sphere == {"Soft": False, "Hard": V >= (4, 0, 0)}
+    assert np.allclose(pl.radius, 0.3)
+    assert exported.description.area_lights.spread[0] == pytest.approx(math.radians(40))
+    assert not any("spread" in w for w in exported.warnings)
+
+
+@pytest.mark.skipif(V < (4, 0, 0), reason="light normalize exists from Blender 4.0 on")
+def test_point_and_sun_without_normalize():
+    """Cycles without normalisation: a point light's radiance is P/π (I = P·r², or P/π at
+    r = 0); a sun's strength is the radiance of its disk (E = P·π·sin²(angle/2))."""
+    pt = h.light("POINT", energy=10.0, shadow_soft_size=0.2)
+    sun = h.light("SUN", energy=2.0, angle=math.radians(10))
+    pt.data.normalize = sun.data.normalize = False
+    d = _lights().description
+    assert np.allclose(d.point_lights.intensity[0], 10 * 0.2**2, rtol=1e-5)
+    assert np.allclose(d.sun_lights.irradiance[0], 2 * math.pi * math.sin(math.radians(5)) ** 2, rtol=1e-5)
+    pt.data.shadow_soft_size = 0.0
+    assert np.allclose(h.export().description.point_lights.intensity[0], 10 / math.pi, rtol=1e-5)
+
+
 def test_light_node_strength_multiplies():
     ob = h.light("POINT", energy=10.0)
     ob.data.use_nodes = True
@@ -391,6 +424,27 @@ def test_camera_desc_fields():
     assert np.allclose(r.T @ r, np.eye(3), atol=1e-6)  # scale removed
     assert np.allclose(c.world_from_camera[:3, 3], (1, 2, 3))
     assert c.projection == "PERSP"
+
+
+def test_depth_of_field_fields_as_cycles():
+    """Aperture radius lens·10⁻³/(2·f-stop); focus distance, or the focus object's distance
+    along the view axis; blades, rotation, ratio; no DOF → a pinhole; ortho DOF warns."""
+    cam = h.camera(location=(0, -4, 1), target=(0, 0, 1), lens=50.0)
+    dof = cam.data.dof
+    assert h.export().description.camera.aperture_radius == 0.0
+    dof.use_dof, dof.aperture_fstop, dof.focus_distance = True, 2.0, 3.5
+    dof.aperture_blades, dof.aperture_rotation, dof.aperture_ratio = 6, 0.25, 1.5
+    c = h.export().description.camera
+    assert c.aperture_radius == pytest.approx(0.05 / 4.0)
+    assert c.focus_distance == pytest.approx(3.5)
+    assert (c.aperture_blades, c.aperture_rotation, c.aperture_ratio) == (6, pytest.approx(0.25), 1.5)
+    target = h.plane("Target", location=(1.0, 2.0, 0.0))      # 6 m ahead, 1 m aside and down
+    dof.focus_object = target
+    assert h.export().description.camera.focus_distance == pytest.approx(6.0, abs=1e-5)
+    cam.data.type = "ORTHO"
+    exported = h.export()
+    assert exported.description.camera.aperture_radius == 0.0
+    assert any("depth of field" in w for w in exported.warnings)
 
 
 CAMERA_CASES = [
@@ -471,3 +525,13 @@ def test_matrix_copy_is_world_space():
     child.matrix_parent_inverse = Matrix.Identity(4)
     desc = h.export().description
     assert np.allclose(desc.mesh.positions[:, 2], 10)
+
+
+def test_lights_shown_to_the_camera_warn():
+    """Cycles shows a light with a size to camera rays when its Camera visibility is on (off by
+    default for lights); Ercuts never does, and says so."""
+    ob = h.light("AREA", energy=10.0, size=1.0)
+    assert not ob.visible_camera                                   # Blender's default
+    assert _lights().warnings == []
+    ob.visible_camera = True
+    assert any("visible to the camera" in w for w in h.export().warnings)

@@ -128,7 +128,7 @@ def seeds_from_path_tracer(scene: BuiltScene, max_depth: int, rng: np.random.Gen
     pix = np.arange(w.n_pixels) if pix is None else pix
     n, K = len(pix), max_depth + 2
     raster = w.raster(pix) + rng.random((n, 2))
-    o, d = cam.generate_rays(raster)
+    o, d = cam.generate_rays(raster, cam.lens_samples(rng, n))
     base = PathBatch.empty(n, K)
     base.raster[:] = raster
     base.p[:, 0] = o
@@ -182,7 +182,7 @@ def _nee_seeds(scene, base, lanes, surf, wo, bsdf, beta, depth, rng, out_paths, 
     paths.k[:] = depth + 1
     paths.light[:] = ls.light[r]
     infinite = (kind[r] == SUN) | (kind[r] == ENV)
-    paths.p[:, depth + 1] = np.where(infinite[:, None], ls.wi[r], ls.p[r])
+    paths.p[:, depth + 1] = np.where(infinite[:, None], ls.wi[r], lights.chain_vertex(ls.light[r], ls.p[r]))
     surf_l = ((kind[r] == AREA) | (kind[r] == TRI))[:, None]
     paths.ng[:, depth + 1] = np.where(surf_l, ls.n[r], 0.0)
     paths.ns[:, depth + 1] = paths.ng[:, depth + 1]

@@ -6,13 +6,14 @@ All of them work in the measure of :mod:`.paths` (raster position of x1, then
 area/counting/solid-angle measures for x2 … x_k).
 
 * **Lens perturbation** [Veach 1997 §11.4.3; Mitsuba ``mut_lens.cpp``]: move the raster
-  position by r ∈ [0.1 px, √(0.05·W·H/π) px] with density ∝ 1/r, re-trace x1, reconnect
-  to the fixed x2. Symmetric: ratio = 1.
+  position by r ∈ [0.1 px, √(0.05·W·H/π) px] with density ∝ 1/r, re-trace x1 (from the
+  path's own lens point x0 with depth of field), reconnect to the fixed x2. Symmetric: ratio = 1.
 * **Caustic perturbation** [Veach 1997 §11.4.4; Mitsuba ``mut_caustic.cpp``]: rotate the
   direction x2 → x1 by θ ∈ [θ1, θ2] (∝ 1/θ, scaled by |x0x1|/|x1x2| so x1 moves about as
   much as under the lens perturbation), re-trace x1 from the fixed x2 and connect it to
-  the pinhole. The angular density is symmetric and cancels; the Jacobian from raster to
-  the direction at x2 does not: ratio = J(x)/J(y), J = cos³θ_cam·|x0x1|²/|x1x2|².
+  the pinhole (the path's lens point x0). The angular density is symmetric and cancels; the
+  Jacobian from raster to the direction at x2 does not: ratio = J(x)/J(y),
+  J = cos³θ_cam·|x0x1|²/|x1x2|² (the same with a thin lens, θ measured at x0).
 * **Multi-chain perturbation** [Veach 1997 §11.4.5]: needs two specular chains; the
   material model has no delta lobes, so it never applies (reported as 0 proposals).
 * **Bidirectional mutation** [Veach 1997 §11.4.2], restricted to deletions that start at
@@ -104,7 +105,7 @@ def lens_perturbation(ctx: MutationContext, x: PathBatch, rng: np.random.Generat
     phi = 2 * np.pi * rng.random(n)
     y.raster = x.raster + np.c_[r * np.cos(phi), r * np.sin(phi)]
     valid = _in_window(scene, y.raster)
-    o, d = scene.camera.generate_rays(y.raster)
+    o, d = scene.camera.rays_from(y.raster, x.p[:, 0])      # the path's lens point stays
     surf = scene.intersect(o, d)
     valid &= surf.valid
     rows = np.flatnonzero(valid)
@@ -154,12 +155,12 @@ def caustic_perturbation(ctx: MutationContext, x: PathBatch, rng: np.random.Gene
     valid &= surf.valid
     rows = np.flatnonzero(valid)
     _set_vertex(y, rows, 1, surf.p[rows], surf.ng[rows], surf.ns[rows], surf.mat[rows])
-    raster, on_film = cam.raster_of(surf.p)
+    raster, on_film = cam.raster_of(surf.p, x.p[:, 0] if cam.has_lens else None)
     valid &= on_film
     y.raster = np.where(valid[:, None], raster, x.raster)
     rows = np.flatnonzero(valid)
     if len(rows):
-        seen = scene.tracer.visible(np.broadcast_to(cam.position, (len(rows), 3)).copy(), None,
+        seen = scene.tracer.visible(np.ascontiguousarray(x.p[rows, 0]), None,
                                     surf.p[rows], surf.ng[rows])
         valid[rows[~seen]] = False
     # The reverse move must be able to rotate back: θ inside y's own (scaled) range. The
@@ -195,21 +196,9 @@ def _light_vertex_pdf(scene: BuiltScene, paths: PathBatch, rows: NDArray) -> NDA
     vertex's own measure: area (area lights, emissive triangles), counting (point, sun)
     or solid angle (environment: the density of the direction stored in slot k); the
     light-selection pmf included."""
-    lights = scene.lights
-    light = paths.light[rows]
-    kind, loc = lights.kind[light], lights.local[light]
-    area = np.ones(len(rows))
-    a, t = kind == AREA, kind == TRI
-    area[a] = lights.ar_area[loc[a]]
-    area[t] = lights.tri_area[loc[t]]
-    out = lights.pmf(light) / area
-    env = kind == ENV
-    if lights.env_map is None:
-        out[env] /= 4 * np.pi                     # uniform sphere (kept bit-identical)
-    elif env.any():
-        e = rows[env]
-        out[env] *= lights.env_pdf_dir(slot_rows(paths.p, e, paths.k[e]))
-    return out
+    k = paths.k[rows]
+    return scene.lights.pdf_illuminate_vertex(paths.light[rows], slot_rows(paths.p, rows, k - 1),
+                                              slot_rows(paths.p, rows, k))
 
 
 def bidirectional_mutation(ctx: MutationContext, x: PathBatch, rng: np.random.Generator) -> Proposal:
@@ -278,7 +267,7 @@ def bidirectional_mutation(ctx: MutationContext, x: PathBatch, rng: np.random.Ge
         kind = lights.kind[ls.light]
         ok = ls.valid
         infinite = (kind == SUN) | (kind == ENV)
-        lp = np.where(infinite[:, None], ls.wi, ls.p)
+        lp = np.where(infinite[:, None], ls.wi, lights.chain_vertex(ls.light, ls.p))
         y.light[r] = ls.light
         slot = y.k[r]
         y.p[r, slot] = lp

@@ -18,6 +18,13 @@ tracer's integrand [Veach 1997 eq. 8.7 with the pixel filter absorbed]::
 
 Only paths whose x2 is a surface point can become VPLs (paper §3.3); :func:`is_target`
 marks them, and the chains' target function is f·[is_target].
+
+Soft lights: a point/spot light of radius r > 0 is stored as its centre and evaluated as a
+point (:meth:`~ercuts_core.lights.LightSet.chain_vertex`: only the chains' target in the
+light's penumbra is approximated); a sun's direction is the one sampled in its cone (uniform,
+so the counting measure stays exact); spread area lights emit ``LightSet.area_radiance``.
+With depth of field x0 is the path's lens point (part of the state, uniform on the aperture,
+so the camera factor stays 1).
 """
 from __future__ import annotations
 
@@ -180,8 +187,7 @@ def _emitted(scene: BuiltScene, paths: PathBatch, rows: NDArray, w_out: NDArray)
     out = np.zeros((len(rows), 3))
     m = kind == AREA
     if m.any():
-        facing = dot(lights.ar_n[loc[m]], w_out[m]) > 0
-        out[m] = lights.ar_L[loc[m]] * facing[:, None]
+        out[m] = lights.area_radiance(loc[m], w_out[m])
     m = kind == TRI
     if m.any():
         out[m] = lights.tri_radiance_at(loc[m], slot_rows(paths.p, rows[m], paths.k[rows[m]]))

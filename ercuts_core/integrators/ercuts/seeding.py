@@ -74,10 +74,12 @@ class SeedCollector:
             p_l = np.where(infinite[:, None], lig.wo[1, lane], lig.p[0, lane])
             n_l = np.where(on_surf[:, None], lig.ng[0, lane], 0.0)
             light = lig.light[lane]
-        P.p[rows, k], P.ng[rows, k], P.ns[rows, k] = p_l, n_l, n_l
+        P.p[rows, k], P.ng[rows, k], P.ns[rows, k] = lights.chain_vertex(light, p_l), n_l, n_l
         P.mat[rows, k] = 0
         P.k[:], P.light[:] = k, light
         P.raster[:] = rec.raster if rec.raster is not None else cam.raster[lane]
+        if rec.eye is not None:                          # t = 1: the lens point connected to
+            P.p[rows, 0] = rec.eye
         return P
 
 

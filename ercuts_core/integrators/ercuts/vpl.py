@@ -76,7 +76,7 @@ def build_gbuffer(scene: BuiltScene, samples: int, rng: np.random.Generator,
     pix = np.repeat(np.arange(w.n_pixels), samples)
     raster = w.raster(pix).astype(np.float64)
     raster += rng.random((len(pix), 2)) if jitter is None else jitter
-    o, d = scene.camera.generate_rays(raster)
+    o, d = scene.camera.generate_rays(raster, scene.camera.lens_samples(rng, len(pix)))
     surf = scene.intersect(o, d)
     wo = -d
     flip = dot(surf.ng, wo) < 0
@@ -223,7 +223,7 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
         h = np.flatnonzero(surf.valid)
         if len(h):
             y = surf.subset(h)
-            con = cam.connect(y.p)
+            con = cam.connect(y.p, cam.lens_samples(rng, len(h)))
             ok = con.valid
             if ok.any():
                 k = np.flatnonzero(ok)
@@ -244,8 +244,8 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
                 contrib = np.pi * fr * ratio * cos_cam * con.factor[k] * clamp
                 good = np.flatnonzero(contrib > 0)
                 if len(good):
-                    cam_pos = np.broadcast_to(cam.position, (len(good), 3)).copy()
-                    vis = scene.tracer.visible(yk.p[good], ng[good], cam_pos, None)
+                    eye = con.origin[k[good]]           # the pinhole or the sampled lens point
+                    vis = scene.tracer.visible(yk.p[good], ng[good], np.ascontiguousarray(eye), None)
                     val[h[k[good]]] = contrib[good] * vis
         ns = n_samples if np.ndim(n_samples) == 0 else np.maximum(np.asarray(n_samples)[v], 1)
         total[v] = np.bincount(vv - s, weights=val, minlength=len(v)) / ns

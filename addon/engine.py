@@ -12,8 +12,10 @@ traceback goes to the console. Warnings are reported once per render.
 While the core runs, its ``preview`` callback (when the core has one) shows the image
 so far (``framebuffer.show_preview``). In background mode (``blender -b``) Blender prints
 a ``Fra:… | <stats>`` line for every ``update_stats`` call, so there the engine prints one
-line per phase and updates the stats at most every :data:`BACKGROUND_STATS_INTERVAL`
-seconds (the core reports several times a second; the details go to the JSON sidecar).
+line per phase (of the first progressive iteration; each later iteration gets one
+``Iteration N`` line when its first phase starts) and updates the stats at most every
+:data:`BACKGROUND_STATS_INTERVAL` seconds (the core reports several times a second; the
+details go to the JSON sidecar).
 
 A render that reaches its time limit ends normally. One stopped by Blender's break flag
 (Esc in the UI; Ctrl-C, i.e. SIGINT, in ``blender -b``) keeps its partial image in the UI,
@@ -122,6 +124,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         self._stats_prefix = ""
         self._layer_name = ""
         self._phase = None
+        self._phases_seen = []
         self._stats_time = -float("inf")
         self._user_cancelled = False
 
@@ -197,6 +200,7 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         self._layer_name = layer_name
         self._stats_prefix = f"{layer_name} | " if len(scene.view_layers) > 1 else ""
         self._phase = None
+        self._phases_seen = []
         self._stats_time = -float("inf")
         self.update_stats("Ercuts", f"{self._stats_prefix}Exporting scene")
 
@@ -318,6 +322,19 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
 
         return preview
 
+    def _phase_line(self, phase: str) -> str | None:
+        """What the background log says when ``phase`` starts: the phase's name the first
+        time; ``Iteration N`` when the first phase starts again (a new progressive
+        iteration, N counted from 1); nothing for a later iteration's other phases."""
+        seen = self._phases_seen
+        if phase not in seen:
+            seen.append(phase)
+            return phase
+        if phase == seen[0]:
+            seen.append(phase)
+            return f"Iteration {seen.count(phase)}"
+        return None
+
     def _progress(self, fraction: float, message: str) -> bool:
         """Core progress callback: progress bar, stats line, cancel polling.
 
@@ -333,8 +350,9 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
         background = bpy.app.background
         if phase != self._phase:
             self._phase = phase
-            if background:
-                print(f"Ercuts: {self._layer_name} | {phase} | "
+            line = self._phase_line(phase)
+            if background and line:
+                print(f"Ercuts: {self._layer_name} | {line} | "
                       f"{fraction:4.0%} | {_format_time(elapsed)}", flush=True)
                 self._stats_time = now          # that line says it: no stats line now
         if not background or now - self._stats_time >= BACKGROUND_STATS_INTERVAL:

@@ -3,6 +3,7 @@ display, cancel), view layers, material override, hidden objects, seeds, the JSO
 statistics sidecar and the preview-thumbnail settings."""
 from __future__ import annotations
 
+import functools
 import importlib
 import json
 import os
@@ -137,6 +138,16 @@ def test_background_prints_one_line_per_phase(tmp_path, capsys):
     assert phases[0] == "BDPT" and set(phases) <= set(engine_module.phases())
     fractions = [float(line.split(" | ")[2].rstrip("%")) for line in lines]
     assert fractions == sorted(fractions)
+
+
+def test_later_iterations_get_one_log_line_each():
+    """Phases repeat per progressive iteration; the log names them once, then one line per
+    iteration when its first phase starts again."""
+    fake = SimpleNamespace(_phases_seen=[])
+    line = functools.partial(ErcutsRenderEngine._phase_line, fake)
+    order = ["BDPT", "ER chains", "Lightcuts", "BDPT", "ER chains", "Lightcuts", "BDPT", "Lightcuts"]
+    assert [line(p) for p in order] == ["BDPT", "ER chains", "Lightcuts", "Iteration 2", None, None,
+                                        "Iteration 3", None]
 
 
 def test_progressive_preview_is_shown(tmp_path, monkeypatch):

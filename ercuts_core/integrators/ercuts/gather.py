@@ -127,15 +127,15 @@ class Gather:
     def _more_passes(self, sweep: "_Sweep", L: NDArray, t_pass: float, schedule: Schedule, show,
                      done_pt: NDArray) -> tuple[NDArray, float]:
         """Passes 2 … ``stochastic_passes`` of the stochastic gather (more while the time left
-        holds them when the iteration fills its time), each point's estimate the mean of its
-        passes. A pass the iteration's time cuts short keeps the points it reached (spread over
+        holds them when the iteration fills its time, asked again after every pass: once the
+        passes are done, time that no later iteration would use goes into more passes), each
+        point's estimate the mean of its passes. A pass the iteration's time cuts short keeps the points it reached (spread over
         the image by :func:`spread_order`): each pass is an unbiased estimate per point, so a
         mean over 1 or 2 passes is too. Returns the mean (2, Q, 3) and the passes made
         (fractional for a cut-short last one)."""
         s, n_pts = self.settings, len(sweep.pts_all)
-        fill = schedule.fills_time()
         total, count, passes = L.copy(), np.ones(len(self.g.pixel)), 1.0
-        while (fill or passes < s.stochastic_passes) and not schedule.clock.cancelled \
+        while (passes < s.stochastic_passes or schedule.fills_time()) and not schedule.clock.cancelled \
                 and schedule.remaining() > PASS_START * t_pass:
             L2, _, _, done2 = sweep.run(int(passes), lambda parts, c: None)
             pts = sweep.pts_all[:done2]

@@ -23,9 +23,10 @@ CLAMP_ALPHA = 2.0 / 3.0
 #: A new iteration starts only if the time left is at least this share of the last one's
 #: duration (the time is better left unused than spent on an iteration of a few samples).
 START_SHARE = 0.5
-#: An iteration is paced (its phases share the time left, so it finishes in time) when the
-#: time left is under this many times the last iteration's duration.
-PACE_MARGIN = 1.25
+#: An iteration is paced (its phases share the time left, so it finishes in time and fills
+#: it) when the time left is under this many times the last iteration's duration: 1 +
+#: START_SHARE, so an unpaced iteration of the last one's duration leaves time for another.
+PACE_MARGIN = 1.0 + START_SHARE
 
 
 def iteration_seed(seed: int, k: int) -> int:

@@ -88,8 +88,8 @@ from .initialization import RoughImage, rough_camera, rough_factor, scene_with_c
 from .light_tree import build_light_tree
 from .mutations import INACTIVE, NAMES, MutationContext
 from .pacing import Schedule
-from .progressive import (iteration_end, iteration_seconds, iteration_settings, iteration_target,
-                          more_iterations, paced_iteration, stratified_jitter)
+from .progressive import (iteration_end, iteration_settings, iteration_target, more_iterations,
+                          paced_iteration, stratified_jitter)
 from .paths import PathBatch
 from .seeding import seed_paths
 from . import warm_up
@@ -116,16 +116,15 @@ class ErcutsIntegrator:
     # ------------------------------------------------------------------ driver
     def render(self, film: Film, clock: Clock, timings: dict, stats: dict) -> None:
         """Render ``settings.iterations`` iterations into ``film`` (:mod:`.progressive`; 0: as
-        many as the time limit allows) and average them. Under a time limit every iteration
-        is paced to its part of the time (:func:`~.progressive.iteration_end`: 1/(N − k) of
-        the time left with N iterations asked for, else at most
-        :func:`~.progressive.iteration_seconds`, the last one the rest). The first iteration stopped early (cancel, time limit) leaves the rough BDPT image (before
+        many as the time limit allows) and average them. Under a time limit the first
+        iteration, and one the time left would not hold at full quality, are paced to finish
+        in time (:func:`~.progressive.paced_iteration`); the others run at full quality. The
+        first iteration stopped early (cancel, time limit) leaves the rough BDPT image (before
         the gather) or the rough image where not gathered; a later one stopped early is
         discarded, so the image is the average of the completed iterations."""
         base, window = self.settings, self.scene.camera.window
         warm_up.start()                     # compile the gather's kernels during phases 1–4
         target = iteration_target(base.iterations, clock.deadline is not None)
-        cap = iteration_seconds(window.n_pixels * base.shading_samples)
         k, durations = 0, []
         while True:
             t0 = time.perf_counter()
@@ -134,8 +133,9 @@ class ErcutsIntegrator:
             part = film if k == 0 else Film(window)
             it_timings, it_stats = (timings, stats) if k == 0 else ({}, {})
             span = None if target is None else (k / target, (k + 1) / target)
-            self.schedule = Schedule(clock, base.direct_vpls, paced=paced_iteration(clock), span=span,
-                                     end=iteration_end(k, target, clock, t0, cap),
+            paced = paced_iteration(k, target, clock, durations)
+            self.schedule = Schedule(clock, base.direct_vpls, paced=paced, span=span,
+                                     end=iteration_end(k, target, clock, t0),
                                      last=target is not None and k + 1 >= target)
             complete = self._iteration(part, clock, it_timings, it_stats)
             stats["iterations_paced"] = stats.get("iterations_paced", 0) + int(self.schedule.paced)
@@ -157,8 +157,8 @@ class ErcutsIntegrator:
     def _iteration(self, film: Film, clock: Clock, timings: dict, stats: dict) -> bool:
         """One complete Ercuts estimate into ``film`` (the five phases) on the iteration's
         :attr:`schedule` (:class:`~.pacing.Schedule`: paced, its phases share the
-        iteration's time; else, without a time limit, they run to their sample counts).
-        Returns False when stopped early."""
+        iteration's time; else they run at full quality and the iteration is abandoned if the
+        time runs out). Returns False when stopped early."""
         self.clock, self.timings, self.stats = clock, timings, stats
         self.rough: RoughImage | None = None
         try:

@@ -38,8 +38,9 @@ class Schedule:
     Args:
         clock: the render's :class:`~ercuts_core.integrators.base.Clock`.
         direct_vpls: the paper's direct light by VPLs (no direct-light phase).
-        paced: the phases share the time left (every iteration under a time limit);
-            False: no phase deadlines and no gather pacing (no time limit).
+        paced: the phases share the time left (the first iteration); False: no phase
+            deadlines and no gather pacing (later iterations run at full quality and are
+            abandoned if the time limit passes).
         span: (start, end) of the render's progress that this iteration covers (iteration k
             of N: (k/N, (k+1)/N)); None: progress is the share of the time limit used (as
             many iterations as the time allows).

@@ -23,17 +23,10 @@ CLAMP_ALPHA = 2.0 / 3.0
 #: A new iteration starts only if the time left is at least this share of the last one's
 #: duration (the time is better left unused than spent on an iteration of a few samples).
 START_SHARE = 0.5
-#: Under a time limit (no iteration count) an iteration is paced to at most this many
-#: seconds per :data:`ITERATION_PIXELS` shading points (never less than these seconds):
-#: an iteration's error has parts that more time inside it barely reduces (one shading
-#: position per pixel, one VPL set), which independent iterations average away. Measured at
-#: 160×120 on 2 cores (benchmarks/results/runs, 10/30/60 s budgets, floor-corrected relMSE):
-#: the mean of three 10 s renders vs one 30 s render 0.016 vs 0.025 (S-corridor), 0.015 vs
-#: 0.018 (baffle), 0.00086 vs 0.0012 (Cornell box), 0.044 vs 0.045 (door), but 0.00081 vs
-#: 0.00052 on the directly lit scene; two 30 s vs one 60 s: 0.024 vs 0.043 (door), 0.0090 vs
-#: 0.0156 (textured living room). Below ~10 s the rough BDPT and the chains starve.
-ITERATION_SECONDS = 10.0
-ITERATION_PIXELS = 160 * 120
+#: An iteration is paced (its phases share the time left, so it finishes in time and fills
+#: it) when the time left is under this many times the last iteration's duration: 1 +
+#: START_SHARE, so an unpaced iteration of the last one's duration leaves time for another.
+PACE_MARGIN = 1.0 + START_SHARE
 
 
 def iteration_seed(seed: int, k: int) -> int:
@@ -84,32 +77,24 @@ def iteration_target(iterations: int, time_limited: bool) -> int | None:
     return None if time_limited else 1
 
 
-def iteration_seconds(n_points: int) -> float:
-    """Longest time an iteration is paced to under a time limit without an iteration count:
-    :data:`ITERATION_SECONDS` per :data:`ITERATION_PIXELS` of the ``n_points`` shading points
-    (pixels × shading samples), at least :data:`ITERATION_SECONDS` (10 s at 160×120, 160 s
-    at 640×480, 1080 s at 1920×1080: budgets below that get one iteration)."""
-    return ITERATION_SECONDS * max(1.0, n_points / ITERATION_PIXELS)
-
-
-def paced_iteration(clock) -> bool:
-    """Pace the iteration to its time? Under a time limit, every one: its phases share its
-    part of the time (:func:`iteration_end`), so it finishes in time; phases that finish
-    early (a small scene) lose nothing and pass their time on. Without a limit, none."""
-    return clock.deadline is not None
-
-
-def iteration_end(k: int, target: int | None, clock, now: float, cap: float = float("inf")) -> float | None:
-    """Deadline of iteration ``k``: with ``target`` iterations 1/(target − k) of the time left
-    (time an iteration does not need flows on to the next); without, ``cap`` seconds
-    (:func:`iteration_seconds`) unless what would be left after them could not hold another
-    iteration (under (1 + :data:`START_SHARE`) × ``cap``): then the clock's deadline."""
+def paced_iteration(k: int, target: int | None, clock, durations: list[float]) -> bool:
+    """Pace iteration ``k`` (of ``target``, None: until the time limit) to its time? Under a
+    time limit: with a target, every one (each gets its part of the time left); without, the
+    first (its cost is unknown: it must finish in time) and any later one that the time left
+    would not hold at full quality (under :data:`PACE_MARGIN` × the last duration). The
+    others run at full quality, so a long budget is spent on many complete iterations, not
+    one stretched one."""
     if clock.deadline is None:
-        return None
-    left = max(clock.deadline - now, 0.0)
-    if target is not None:
-        return now + left / max(target - k, 1)
-    return clock.deadline if left < (1.0 + START_SHARE) * cap else now + cap
+        return False
+    return target is not None or k == 0 or clock.remaining() < PACE_MARGIN * durations[-1]
+
+
+def iteration_end(k: int, target: int | None, clock, now: float) -> float | None:
+    """Deadline of iteration ``k``: the clock's, or with ``target`` iterations 1/(target − k)
+    of the time left (time an iteration does not need flows on to the next)."""
+    if clock.deadline is None or target is None:
+        return clock.deadline
+    return now + max(clock.deadline - now, 0.0) / max(target - k, 1)
 
 
 def fills_time(clock, started: float, now: float) -> bool:

@@ -371,7 +371,7 @@ def why_missed(scene, budget, g, refs, budgets, worst_ratio=None) -> list[str]:
                          "glossy x2; cut caps, below)")
     energy = med(er, "energy")
     if abs(energy - 1) > TARGET_ENERGY:
-        notes.append(_energy_reason(er, ref, g.get((scene, "BDPT", budget))))
+        notes.append(_energy_reason(er, ref, g.get((scene, "BDPT", budget)), g.get((scene, "PATH", budget))))
     errs = [r["stats"].get("max_error_for_time_limit") for r in er]
     errs = [e for e in errs if e]
     if errs:
@@ -391,8 +391,8 @@ def why_missed(scene, budget, g, refs, budgets, worst_ratio=None) -> list[str]:
         notes.append(f"the gather did not finish in {incomplete} of {len(er)} runs (part of the image missing)")
     clamped = float(np.median([_clamped_share(r["stats"]) for r in er]))
     if clamped > 0.01:
-        notes.append(f"the VPL clamp removed {100 * clamped:.1f} % of the gathered VPL light before the "
-                     "image was scaled back to P (stats clamped_energy: the clamp's energy moves elsewhere)")
+        notes.append(f"the VPL clamp removed {100 * clamped:.1f} % of the gathered VPL light "
+                     "(stats clamped_energy: a bias the clamp's schedule shrinks as iterations accumulate)")
     edge, pixels = _edge_share(er, ref)
     if edge > 0.2:
         notes.append(f"{100 * edge:.0f} % of the relMSE of ERCUTS's seed mean sits on the {100 * pixels:.0f} % "
@@ -428,26 +428,30 @@ def why_missed(scene, budget, g, refs, budgets, worst_ratio=None) -> list[str]:
     return notes
 
 
-def _energy_reason(er: list[dict], ref: dict, bdpt: list[dict] | None) -> str:
-    """Why ERCUTS's energy is off: its image energy is the rough BDPT pass's estimate (the
-    VPL image is scaled to P), so compare the two per seed before blaming the VPL steps."""
+def _energy_reason(er: list[dict], ref: dict, bdpt: list[dict] | None, path: list[dict] | None) -> str:
+    """Why ERCUTS's energy is off: first whether this core's unbiased integrators (BDPT, PATH)
+    at the same budget are off alike (then the gap is in the scene model all three share:
+    materials, lights, units), else whether the rough BDPT pass's P is (only with the
+    ``normalize_to_p`` ablation is the VPL image scaled to P), else the VPL steps."""
     from ercuts_core.sampling import luminance
 
+    e = med(er, "energy")
+    others = [(name, med(runs, "energy")) for name, runs in (("BDPT", bdpt), ("PATH", path)) if runs]
+    if others and all(abs(x - e) <= 0.5 * TARGET_ENERGY and abs(x - 1) > TARGET_ENERGY for _, x in others):
+        listed = ", ".join(f"{name} {x:.3f}" for name, x in others)
+        return (f"this core's unbiased integrators at the same budget are off alike ({listed} against "
+                f"ERCUTS's {e:.3f}): the gap is in the scene model the three share (materials, lights), "
+                "not in ERCUTS's steps")
     ref_y = float(luminance(ref["image"]).sum())
     rough = [r["stats"].get("P_all", 0.0) / ref_y for r in er]
-    image = [float(luminance(r["image"]).sum()) / ref_y for r in er]
     energies = ", ".join(f"{r['energy']:.3f}" for r in er)
-    if all(abs(e - q) < 0.01 for e, q in zip(image, rough)):
-        spp = ", ".join(str(r["stats"].get("bdpt_samples", "?")) for r in er)
-        return (f"ERCUTS's energy per seed ({energies}) is its rough BDPT pass's estimate of the image "
-                f"energy ({', '.join(f'{q:.3f}' for q in rough)} of the reference, {spp} spp; the VPL image "
-                "is scaled to P): the miss is that estimate's sampling noise, not the VPL steps, and "
-                "shrinks as 1/√(rough spp)")
     if bdpt and abs(med(bdpt, "energy") - 1) <= TARGET_ENERGY:
-        return (f"energy {med(er, 'energy'):.3f} against BDPT's {med(bdpt, 'energy'):.3f} at the same budget, "
+        return (f"energy {e:.3f} against BDPT's {med(bdpt, 'energy'):.3f} at the same budget, "
                 "while its rough pass estimated " + ", ".join(f"{q:.3f}" for q in rough) +
                 ": the difference comes from ERCUTS's VPL steps, not the scene or units")
-    return "BDPT's energy is also off at this budget: too few samples to judge"
+    return (f"ERCUTS's energy per seed {energies}, its rough BDPT pass's "
+            + ", ".join(f"{q:.3f}" for q in rough) + "; no converged unbiased run of this core at "
+            "this budget to tell the scene model from the VPL steps")
 
 
 def _edge_share(er: list[dict], ref: dict) -> tuple[float, float]:

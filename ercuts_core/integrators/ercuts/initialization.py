@@ -76,6 +76,7 @@ class RoughImage:
         (W, H), (w, h) = full_size, low_size
         self.pixel_area = (W / w) * (H / h)        # full pixels per low-resolution pixel
         self.same = film.window == full
+        self._full: tuple[int, Film] | None = None     # (passes_done, full_film()) cache
         if not self.same:
             pix = np.arange(full.n_pixels)
             raster = (full.raster(pix) + 0.5) * np.array([w / W, h / H])
@@ -94,13 +95,18 @@ class RoughImage:
         return indirect_energy(self.film.light_parts()) * self.pixel_area
 
     def full_film(self) -> Film:
-        """The rough image as a film of the full window (itself when k = 1)."""
+        """The rough image as a film of the full window (itself when k = 1). Built once per
+        state of the rough film (upsampling to 1080p takes ≈ 1 s, which the preview, the
+        gather's fallback and a cancel would otherwise each pay again); read-only."""
         if self.same:
             return self.film
-        out = Film(self.full)
         low = self.film
+        if self._full is not None and self._full[0] == low.passes_done:
+            return self._full[1]
+        out = Film(self.full)
         out.set_pixels(low.light_parts()[:, self.index], (low.alpha / max(low.passes_done, 1))[self.index])
         out.classified = low.classified
+        self._full = (low.passes_done, out)
         return out
 
 

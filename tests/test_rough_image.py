@@ -1,0 +1,55 @@
+"""The rough BDPT image's full-resolution film (step 1): nearest low-resolution pixel, built
+once per state of the rough film (the preview, the gather's fallback and a cancel share it)."""
+import numpy as np
+
+from ercuts_core.camera import Window
+from ercuts_core.film import Film
+from ercuts_core.integrators.ercuts.initialization import RoughImage
+
+
+def _low_film(rng) -> Film:
+    low = Film(Window(0, 0, 4, 2))
+    parts = rng.random((3, 8, 3))
+    low.set_pixels(parts, np.ones(8))
+    return low
+
+
+def test_full_film_is_the_nearest_low_pixel_and_cached_per_state():
+    rng = np.random.default_rng(3)
+    low = _low_film(rng)
+    rough = RoughImage(low, Window(0, 0, 8, 4), (8, 4), (4, 2))
+    full = rough.full_film()
+    img_low, img_full = low.image(), full.image()
+    # Each 2×2 block of full pixels shows its low-resolution pixel.
+    np.testing.assert_array_equal(img_full[::2, ::2], img_low)
+    np.testing.assert_array_equal(img_full[1::2, 1::2], img_low)
+    assert rough.full_film() is full
+    # Another pass changes the rough film: the full film is rebuilt from it.
+    extra = Film(low.window)
+    extra.set_pixels(rng.random((3, 8, 3)), np.ones(8))
+    low.merge(extra)
+    again = rough.full_film()
+    assert again is not full
+    np.testing.assert_allclose(again.image()[::2, ::2], low.image())
+
+
+def test_a_phase_past_its_deadline_stops_after_its_first_pass():
+    """run_passes with a phase deadline already past makes exactly one complete pass (a forced
+    second one left a 1080p render's later phases no time), and without a deadline all."""
+    import time
+
+    from ercuts_core import RenderSettings
+    from ercuts_core.integrators.base import Clock, run_passes
+    from ercuts_core.integrators.path import PathIntegrator
+    from ercuts_core.scene import BuiltScene
+    from ercuts_core.scenes import cornell_box
+    from ercuts_core.validate import sanitize
+
+    scene = BuiltScene(sanitize(cornell_box(8, 6, "mesh")).desc)
+    path = PathIntegrator(scene, RenderSettings(max_depth=2))
+    clock = Clock(0.0, None)
+    late = run_passes(path, Film(path.window), clock, samples=4, batch=16, phase="PATH",
+                      deadline=time.perf_counter() - 1.0)
+    full = run_passes(path, Film(path.window), clock, samples=4, batch=16, phase="PATH")
+    assert late.passes_done == 1 and full.passes_done == 4
+    assert late.image()[..., :3].sum() > 0

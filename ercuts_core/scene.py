@@ -46,6 +46,12 @@ class Surface:
     mat: NDArray
     t: NDArray
 
+    @staticmethod
+    def concat(parts: list["Surface"]) -> "Surface":
+        """The interactions of ``parts`` one after another (ray batches traced in chunks)."""
+        return Surface(*(np.concatenate([getattr(p, f) for p in parts])
+                         for f in ("valid", "p", "ng", "ns", "prim", "mat", "t")))
+
     def subset(self, idx) -> "Surface":
         """The interactions selected by an index array or a boolean mask (N,)."""
         return Surface(*(take_rows(a, idx) for a in (self.valid, self.p, self.ng, self.ns, self.prim,

@@ -175,7 +175,7 @@ class ErcutsIntegrator:
             rough = self.rough = self._rough_bdpt()
         stats["bdpt_samples"] = rough.passes_done
         stats["rough_resolution"] = rough.film.window.width
-        self.clock.show(rough.full_film().image)
+        self.clock.show(lambda: rough.full_film().image())    # built only if a preview is due
         P_all = rough.energy()
         if not s.direct_vpls:     # light seen directly and scattered once: its own passes
             P = rough.indirect_energy()
@@ -185,7 +185,7 @@ class ErcutsIntegrator:
         with self._phase("seeds"):
             window = self.scene.camera.window
             jitter = stratified_jitter(window.n_pixels, s.shading_samples, self.base_seed, self.iteration)
-            g, _ = build_gbuffer(self.scene, s.shading_samples, rng, jitter)
+            g, _ = build_gbuffer(self.scene, s.shading_samples, rng, jitter, poll=self._gbuffer_poll)
             if s.direct_vpls:
                 base, alpha = self._direct_image(g, rng), self._alpha(g)
                 P = max(P_all - float(luminance(base.sum(axis=0)).sum()), 0.0)
@@ -211,6 +211,12 @@ class ErcutsIntegrator:
             light = np.where(gathered.complete[None, :, None], light, rough.full_film().light_parts())
         film.set_pixels(light, alpha)
         self._finish(film, g, chains, vpls, gathered, scale)
+
+    def _gbuffer_poll(self, f: float) -> None:
+        """Progress while the G-buffer is traced; stop the render (:class:`_Stopped`) on Esc."""
+        if not self.clock.poll(self.schedule.fraction("ER chains", 0.0),
+                               f"ER chains: shading points {100 * f:.0f}%"):
+            raise _Stopped
 
     @contextmanager
     def _phase(self, name: str, check: bool = True):
@@ -357,12 +363,13 @@ class ErcutsIntegrator:
         """Phase 5 (:class:`~.gather.Gather`), previewing the gathered pixels over the rough
         image after every batch."""
         window = self.scene.camera.window
-        rough_parts = self.rough.full_film().light_parts()
+        rough = self.rough
 
         def show(point_parts, complete):
             def image():
                 parts = self._compose(base, per_pixel_parts(point_parts, g.samples), None, 1.0)
-                return _rgba(window, np.where(complete[None, :, None], parts, rough_parts), alpha)
+                fallback = rough.full_film().light_parts()
+                return _rgba(window, np.where(complete[None, :, None], parts, fallback), alpha)
             self.clock.show(image)
 
         gather = Gather(self.scene, self.settings, g, self.memory.gather_batch)

@@ -58,9 +58,16 @@ class GBuffer:
     samples: int
 
 
+#: Camera rays per G-buffer chunk (≈ 0.35 s of tracing and shading on 2 cores).
+GBUFFER_CHUNK = 1 << 19
+
+
 def build_gbuffer(scene: BuiltScene, samples: int, rng: np.random.Generator,
-                  jitter: NDArray | None = None) -> tuple[GBuffer, NDArray]:
+                  jitter: NDArray | None = None, poll=None) -> tuple[GBuffer, NDArray]:
     """Trace ``samples`` jittered camera rays per window pixel; returns the G-buffer and rays' d.
+
+    ``poll(fraction)`` is called after every :data:`GBUFFER_CHUNK` rays (a 1080p G-buffer
+    takes ≈ 1.4 s on 2 cores: progress and Esc stay responsive); it may raise to stop.
 
     ``jitter``: (n_pixels·samples, 2) positions in the pixel, in [0, 1)² (default: uniform
     random from ``rng``; progressive renders pass stratified ones,
@@ -77,7 +84,12 @@ def build_gbuffer(scene: BuiltScene, samples: int, rng: np.random.Generator,
     raster = w.raster(pix).astype(np.float64)
     raster += rng.random((len(pix), 2)) if jitter is None else jitter
     o, d = scene.camera.generate_rays(raster, scene.camera.lens_samples(rng, len(pix)))
-    surf = scene.intersect(o, d)
+    parts = []
+    for start in range(0, max(len(pix), 1), GBUFFER_CHUNK):
+        parts.append(scene.intersect(o[start:start + GBUFFER_CHUNK], d[start:start + GBUFFER_CHUNK]))
+        if poll is not None:
+            poll(min(start + GBUFFER_CHUNK, len(pix)) / max(len(pix), 1))
+    surf = parts[0] if len(parts) == 1 else Surface.concat(parts)
     wo = -d
     flip = dot(surf.ng, wo) < 0
     sign = np.where(flip, -1.0, 1.0)[:, None]

@@ -53,3 +53,22 @@ def test_a_phase_past_its_deadline_stops_after_its_first_pass():
     full = run_passes(path, Film(path.window), clock, samples=4, batch=16, phase="PATH")
     assert late.passes_done == 1 and full.passes_done == 4
     assert late.image()[..., :3].sum() > 0
+
+
+def test_fill_equals_merging_the_full_film_and_partial_parts_match():
+    rng = np.random.default_rng(4)
+    low = _low_film(rng)
+    rough = RoughImage(low, Window(0, 0, 8, 4), (8, 4), (4, 2))
+    filled, merged = Film(rough.full), Film(rough.full)
+    rough.fill(filled)
+    merged.merge(rough.full_film())
+    np.testing.assert_array_equal(filled.image(), merged.image())
+    assert filled.passes_done == merged.passes_done == 1
+    pix = np.array([0, 5, 31])
+    parts, alpha = rough.full_parts(pix)
+    np.testing.assert_array_equal(parts, rough.full_film().light_parts()[:, pix])
+    np.testing.assert_array_equal(alpha, np.ones(3))
+    # A film that already holds a pass gets the rough image added as one more.
+    rough.fill(filled)
+    assert filled.passes_done == 2
+    np.testing.assert_allclose(filled.image(), merged.image())

@@ -164,7 +164,7 @@ class ErcutsIntegrator:
         try:
             self._render(film)
         except _Stopped:
-            film.merge(self.rough.full_film())
+            self.rough.fill(film)
             return False
         return not clock.cancelled
 
@@ -208,7 +208,8 @@ class ErcutsIntegrator:
         scale = self._energy_scale(gathered.parts.sum(axis=0), vpls, P)
         light = self._compose(base, gathered.parts, vpls, scale)
         if not gathered.complete.all():     # cancelled: the rough image where not gathered
-            light = np.where(gathered.complete[None, :, None], light, rough.full_film().light_parts())
+            missing = np.flatnonzero(~gathered.complete)
+            light[:, missing] = rough.full_parts(missing)[0]
         film.set_pixels(light, alpha)
         self._finish(film, g, chains, vpls, gathered, scale)
 

@@ -6,7 +6,7 @@
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,16 +46,18 @@ class Surface:
     mat: NDArray
     t: NDArray
 
+    def arrays(self) -> tuple[NDArray, ...]:
+        """The per-ray arrays in field order."""
+        return tuple(getattr(self, f.name) for f in fields(self))
+
     @staticmethod
     def concat(parts: list["Surface"]) -> "Surface":
         """The interactions of ``parts`` one after another (ray batches traced in chunks)."""
-        return Surface(*(np.concatenate([getattr(p, f) for p in parts])
-                         for f in ("valid", "p", "ng", "ns", "prim", "mat", "t")))
+        return Surface(*(np.concatenate(column) for column in zip(*(p.arrays() for p in parts))))
 
     def subset(self, idx) -> "Surface":
         """The interactions selected by an index array or a boolean mask (N,)."""
-        return Surface(*(take_rows(a, idx) for a in (self.valid, self.p, self.ng, self.ns, self.prim,
-                                                     self.mat, self.t)))
+        return Surface(*(take_rows(a, idx) for a in self.arrays()))
 
 
 class BuiltScene:

@@ -33,28 +33,6 @@ def test_full_film_is_the_nearest_low_pixel_and_cached_per_state():
     np.testing.assert_allclose(again.image()[::2, ::2], low.image())
 
 
-def test_a_phase_past_its_deadline_stops_after_its_first_pass():
-    """run_passes with a phase deadline already past makes exactly one complete pass (a forced
-    second one left a 1080p render's later phases no time), and without a deadline all."""
-    import time
-
-    from ercuts_core import RenderSettings
-    from ercuts_core.integrators.base import Clock, run_passes
-    from ercuts_core.integrators.path import PathIntegrator
-    from ercuts_core.scene import BuiltScene
-    from ercuts_core.scenes import cornell_box
-    from ercuts_core.validate import sanitize
-
-    scene = BuiltScene(sanitize(cornell_box(8, 6, "mesh")).desc)
-    path = PathIntegrator(scene, RenderSettings(max_depth=2))
-    clock = Clock(0.0, None)
-    late = run_passes(path, Film(path.window), clock, samples=4, batch=16, phase="PATH",
-                      deadline=time.perf_counter() - 1.0)
-    full = run_passes(path, Film(path.window), clock, samples=4, batch=16, phase="PATH")
-    assert late.passes_done == 1 and full.passes_done == 4
-    assert late.image()[..., :3].sum() > 0
-
-
 def test_fill_equals_merging_the_full_film_and_partial_parts_match():
     rng = np.random.default_rng(4)
     low = _low_film(rng)

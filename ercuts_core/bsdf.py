@@ -1,4 +1,5 @@
-"""The one material model: Lambertian base + GGX microfacet reflection, two-sided, no deltas.
+"""The one material model: Lambertian base + GGX microfacet reflection + a glass lobe, two-sided,
+with delta lobes for perfectly smooth mirrors and glass.
 
 Per lane (all directions world space, unit, pointing away from the surface; cosines are
 taken with the shading normal n after the two-sided flip described below):
@@ -33,7 +34,23 @@ valid set, i.e. the true density of the valid outputs of ``sample()``.
 Two-sidedness and validity: per call, a lane whose wo is below the geometric normal ng has
 ns and ng flipped. f = 0 and pdf = 0 unless wo and wi are both strictly above the flipped
 ng *and* above the flipped ns (cosines below ``COS_EPS`` count as "on the horizon").
-Reflection only; no delta lobes.
+
+Layers (Cycles' Principled BSDF, 4.x): metallic m, transmission t. The opaque dielectric
+(diffuse + F0_d specular above) has weight o = (1 − m)(1 − t), the metal m, the *glass lobe*
+tw = (1 − m)·t: a smooth dielectric interface with index η (``ior``; η_t/η_i = η when wo is on
+the side ``ng`` points to, 1/η otherwise), exact unpolarised Fresnel reflectance F_r
+[pbrt-v4 eq. 9.5], reflection weight tw (untinted), transmission tw·base, total internal
+reflection; camera (radiance) transport through a refraction carries 1/η_rel², light
+(importance, ``adjoint=True``) transport does not [Veach 1997 §5.2; pbrt-v4 §9.5.2]. So
+kd = o(1 − F0_d)·base, F0 = o·F0_d + m·base, F90 = o·F0_d + m, and the selection
+probabilities are s, d, tw normalised by s + d + tw.
+
+Delta lobes: where α = roughness² ≤ ``DELTA_ALPHA`` (Cycles' singular threshold) the specular
+lobe is a perfect mirror (Schlick F at wo·n, direction reflected about ns) and is left out of
+``eval``/``pdf``; the glass lobe is always sampled as a smooth interface (rough transmission,
+Walter et al. 2007, is not built: a rough glass renders as smooth glass). Delta lobes are
+reached only by ``sample``, which flags them (``BsdfSample.delta``): the weight is the lobe's
+factor over the discrete probability of choosing it, and ``pdf`` that probability.
 
 Numerics: float64; every division is guarded; underflow is flushed silently, so results are
 finite under ``np.errstate(all="raise")`` for grazing (n·wo = 0), wi = ±wo, roughness 0.
@@ -59,6 +76,12 @@ B = NDArray[np.bool_]
 ALPHA_MIN = 1e-3
 #: Cosines at or below this count as grazing: f = 0 and pdf = 0 (avoids 1/cos blow-ups).
 COS_EPS = 1e-10
+#: GGX alpha at or below which the specular and glass lobes are perfectly smooth (delta lobes):
+#: Cycles' threshold (alpha_x·alpha_y ≤ 1e-7, bsdf_microfacet.h), i.e. roughness ≤ 0.01778.
+DELTA_ALPHA = 1e-7 ** 0.5
+#: Principled/Glass default index of refraction and the accepted range.
+DEFAULT_IOR = 1.5
+IOR_MIN, IOR_MAX = 1.0 + 1e-4, 10.0
 
 
 # ---------------------------------------------------------------------------------------
@@ -91,27 +114,39 @@ def _oriented_normals(ns: ArrayLike, ng: ArrayLike) -> tuple[F64, F64]:
 
 
 def _lobe_params(base_color: ArrayLike, roughness: ArrayLike, metallic: ArrayLike,
-                 specular: ArrayLike, n: int) -> dict[str, NDArray]:
+                 specular: ArrayLike, n: int, transmission: ArrayLike = 0.0,
+                 ior: ArrayLike = DEFAULT_IOR) -> dict[str, NDArray]:
     """Per-lane lobe weights of :class:`Bsdf` from Principled parameters broadcast to n lanes.
 
-    Returns the fields kd, f0, f90 (n, 3), alpha, p_spec (n,), is_diffuse (n,) bool
-    (formulas in the module docstring).
+    Returns the fields kd, f0, f90, kt (n, 3), alpha, p_spec, p_tr, kr, eta (n,), is_diffuse,
+    delta (n,) bool (formulas in the module docstring). Layering as Cycles' Principled BSDF
+    (4.x): a metallic fraction m, a transmission fraction (1 − m)·t (the dielectric lobe)
+    and the opaque dielectric (1 − m)(1 − t) (diffuse + specular F0_d).
     """
     base = np.broadcast_to(np.clip(np.asarray(base_color, np.float64), 0.0, 1.0), (n, 3))
-    rough = np.broadcast_to(np.clip(np.asarray(roughness, np.float64), 0.0, 1.0), (n,))
+    r_raw = np.broadcast_to(np.clip(np.asarray(roughness, np.float64), 0.0, 1.0), (n,))
     metal = np.broadcast_to(np.clip(np.asarray(metallic, np.float64), 0.0, 1.0), (n,))
     spec = np.broadcast_to(np.asarray(specular, np.float64), (n,))
+    trans = np.broadcast_to(np.clip(np.asarray(transmission, np.float64), 0.0, 1.0), (n,))
+    eta = np.broadcast_to(np.clip(np.asarray(ior, np.float64), IOR_MIN, IOR_MAX), (n,))
     f0_d = np.clip(0.08 * spec, 0.0, 1.0)
-    m = metal[:, None]
-    kd = (1.0 - m) * (1.0 - f0_d)[:, None] * base
-    f0 = (1.0 - m) * f0_d[:, None] + m * base
-    f90 = (1.0 - m) * f0_d[:, None] + m
-    # Lobe-selection probability p_spec = s/(s + d)
-    s = (1.0 - metal) * f0_d + metal
-    d = (1.0 - metal) * (1.0 - f0_d) * luminance(base)
-    p_spec = np.clip(_div(s, s + d), 0.0, 1.0)
-    return {"kd": kd, "f0": f0, "f90": f90, "alpha": np.maximum(rough * rough, ALPHA_MIN),
-            "p_spec": p_spec, "is_diffuse": s <= 0.0}
+    opaque = (1.0 - metal) * (1.0 - trans)          # weight of the opaque dielectric layer
+    m, o = metal[:, None], opaque[:, None]
+    kd = o * (1.0 - f0_d)[:, None] * base
+    f0 = o * f0_d[:, None] + m * base
+    f90 = o * f0_d[:, None] + m
+    tw = (1.0 - metal) * trans                      # weight of the dielectric (glass) lobe
+    kt = tw[:, None] * base                         # its transmission tint (reflection: white)
+    # Lobe-selection probabilities p_spec = s/(s + d + tw), p_tr = tw/(s + d + tw)
+    s = opaque * f0_d + metal
+    d = opaque * (1.0 - f0_d) * luminance(base)
+    total = s + d + tw
+    p_spec = np.clip(_div(s, total), 0.0, 1.0)
+    p_tr = np.clip(_div(tw, total), 0.0, 1.0 - p_spec)
+    alpha = r_raw * r_raw
+    return {"kd": kd, "f0": f0, "f90": f90, "alpha": np.maximum(alpha, ALPHA_MIN),
+            "p_spec": p_spec, "is_diffuse": (s <= 0.0) & (tw <= 0.0), "kt": kt,
+            "p_tr": p_tr, "kr": np.array(tw), "eta": np.array(eta), "delta": alpha <= DELTA_ALPHA}
 
 
 # ---------------------------------------------------------------------------------------
@@ -143,6 +178,26 @@ def schlick_fresnel(cos_d: F64, f0: F64, f90: F64) -> F64:
     """Schlick's approximation F0 + (F90 − F0)(1 − c)⁵ [Schlick 1994]. cos_d (N,), f0/f90 (N, 3)."""
     m = (1.0 - np.clip(cos_d, 0.0, 1.0)) ** 5
     return f0 + (f90 - f0) * m[:, None]
+
+
+def fresnel_dielectric(cos_i: F64, eta: F64) -> tuple[F64, F64]:
+    """Unpolarised Fresnel reflectance of a smooth dielectric interface [pbrt-v4 eq. 9.5].
+
+    Args:
+        cos_i: (N,) cosine of the incident direction with the normal on its side (≥ 0).
+        eta: (N,) relative index η_t/η_i.
+    Returns:
+        (F_r (N,) in [0, 1], 1 under total internal reflection; cos_t (N,) ≥ 0, the
+        transmitted cosine, 0 under total internal reflection).
+    """
+    c = np.clip(cos_i, 0.0, 1.0)
+    sin2_t = (1.0 - c * c) / (eta * eta)
+    tir = sin2_t >= 1.0
+    cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, 1.0))
+    r_par = _div(eta * c - cos_t, eta * c + cos_t)
+    r_perp = _div(c - eta * cos_t, c + eta * cos_t)
+    F = np.where(tir, 1.0, np.clip(0.5 * (r_par * r_par + r_perp * r_perp), 0.0, 1.0))
+    return F, np.where(tir, 0.0, cos_t)
 
 
 def sample_ggx_vndf(wo_local: F64, alpha: F64, u: F64) -> F64:
@@ -185,6 +240,10 @@ class BsdfSample:
         pdf: (N,) solid-angle pdf of wi [sr⁻¹] (0 where invalid).
         weight: (N, 3) f·|ns·wi|/pdf (0 where invalid).
         valid: (N,) bool; False lanes must be terminated by the caller.
+        delta: (N,) bool, True where a delta lobe (mirror, smooth glass) was sampled: then
+            ``pdf`` is the discrete probability of the event, ``f`` = weight·pdf/|ns·wi| (the
+            delta lobe's factor), and the direction must not be MIS-weighted against light
+            sampling (light sampling cannot produce it) [pbrt-v4 §9.1.2].
     """
 
     wi: F64
@@ -192,6 +251,12 @@ class BsdfSample:
     pdf: F64
     weight: F64
     valid: B
+    delta: B | None = None
+
+    @property
+    def is_delta(self) -> B:
+        """(N,) bool: the sampled lobe was a delta lobe (all False when none was)."""
+        return np.zeros(len(self.valid), bool) if self.delta is None else self.delta
 
 
 @dataclass(frozen=True, eq=False)
@@ -206,7 +271,14 @@ class Bsdf:
         f90: (N, 3) Schlick F90 = lerp(F0_d, 1, metallic).
         alpha: (N,) GGX alpha = max(roughness², 1e-3).
         p_spec: (N,) probability of sampling the specular lobe.
-        is_diffuse: (N,) bool, True where the lane has no specular lobe.
+        is_diffuse: (N,) bool, True where the lane has no specular or glass lobe.
+        kt: (N, 3) glass-lobe weight (1 − metallic)·transmission·base (the transmission tint;
+            the glass lobe's reflection has weight (1 − metallic)·transmission, untinted).
+        p_tr: (N,) probability of sampling the glass lobe.
+        kr: (N,) the glass lobe's reflection weight (1 − metallic)·transmission.
+        eta: (N,) index of refraction of the side ``ng`` points away from (η outside = 1).
+        delta: (N,) bool, the specular and glass lobes are perfectly smooth (delta lobes, not
+            part of eval/pdf; only ``sample`` produces their directions).
         n_smooth: (N, 3) unit smooth normals before a normal map/bump (on ``ng``'s side) and
         shadowing: (N,) int bump-shadowing model codes (:mod:`ercuts_core.bump_shadowing`),
             both None when no lane has one: the diffuse value kd/π is multiplied by
@@ -222,6 +294,11 @@ class Bsdf:
     alpha: F64
     p_spec: F64
     is_diffuse: B
+    kt: F64
+    p_tr: F64
+    kr: F64
+    eta: F64
+    delta: B
     n_smooth: F64 | None = None
     shadowing: NDArray | None = None
 
@@ -230,7 +307,8 @@ class Bsdf:
     @classmethod
     def from_params(cls, base_color: ArrayLike, roughness: ArrayLike, metallic: ArrayLike,
                     specular: ArrayLike, ns: ArrayLike, ng: ArrayLike, n_smooth: ArrayLike | None = None,
-                    shadowing: ArrayLike | None = None) -> Bsdf:
+                    shadowing: ArrayLike | None = None, transmission: ArrayLike = 0.0,
+                    ior: ArrayLike = DEFAULT_IOR) -> Bsdf:
         """Build from per-lane Principled parameters (broadcast to the N lanes of the normals).
 
         Args:
@@ -239,9 +317,11 @@ class Bsdf:
             specular: (N,) "Specular IOR Level" >= 0 (F0_d = 0.08·specular, clipped to 1).
             ns, ng: (N, 3) shading / geometric normals (renormalized; zero rows give f = 0).
             n_smooth, shadowing: bump shadowing (class docstring), or None.
+            transmission: (N,) Principled transmission weight in [0, 1] (1: glass).
+            ior: (N,) index of refraction (clipped to [1.0001, 10]).
         """
         ns, ng = _oriented_normals(ns, ng)
-        lobes = _lobe_params(base_color, roughness, metallic, specular, ng.shape[0])
+        lobes = _lobe_params(base_color, roughness, metallic, specular, ng.shape[0], transmission, ior)
         if n_smooth is not None and shadowing is not None:
             lobes.update(n_smooth=_oriented_normals(n_smooth, ng)[0],
                          shadowing=np.asarray(shadowing, np.int8).reshape(-1))
@@ -259,7 +339,8 @@ class Bsdf:
         ns, ng = _oriented_normals(ns, ng)
         rows = _lobe_params(table.base_color.astype(np.float64), table.roughness.astype(np.float64),
                             table.metallic.astype(np.float64), table.specular.astype(np.float64),
-                            len(table.roughness))
+                            len(table.roughness), table.transmission.astype(np.float64),
+                            table.ior.astype(np.float64))
         return cls(ns=ns, ng=ng, **{k: take_rows(v, idx) for k, v in rows.items()})
 
     def __len__(self) -> int:
@@ -279,6 +360,18 @@ class Bsdf:
         general formulas reduce to f = kd/π, pdf = cos/π bit for bit (tests/test_bsdf.py).
         """
         return bool(self.is_diffuse.all())
+
+    @cached_property
+    def has_delta(self) -> bool:
+        """True when some lane has a delta lobe (a smooth specular or glass lobe)."""
+        return bool(((self.delta & (self.p_spec > 0.0)) | (self.p_tr > 0.0)).any())
+
+    @cached_property
+    def is_delta(self) -> B:
+        """(N,) bool: every lobe of the lane is a delta lobe (a perfect mirror, smooth glass):
+        eval and pdf are 0 for every direction, so no connection or light sample can reach it."""
+        smooth_spec = self.delta | (self.p_spec <= 0.0)      # the glass lobe is always sampled as smooth
+        return smooth_spec & ~self.is_diffuse & (self.kd.max(axis=1) <= 0.0)
 
     # -- evaluation -------------------------------------------------------------------
 
@@ -318,14 +411,15 @@ class Bsdf:
         lam_o, lam_i = smith_lambda(cos_o, self.alpha), smith_lambda(cos_i, self.alpha)
         G2 = 1.0 / (1.0 + (lam_o + lam_i))  # height-correlated [Heitz 2014, eq. 99]
         F = schlick_fresnel(cos_d, self.f0, self.f90)
-        cc = np.where(valid, 4.0 * cos_o * cos_i, 0.0)
+        cc = np.where(valid & ~self.delta, 4.0 * cos_o * cos_i, 0.0)  # delta lobes: not in f
         f_spec = F * _div(D * G2, cc)[:, None]
         kd_pi = self.kd * (inv_pi if self.shadowing is None else inv_pi[:, None])
         f = np.where(valid[:, None], kd_pi + f_spec, 0.0)
         # Mixture pdf of sample(): VNDF reflection pdf G1(wo) D / (4 cos_o) and cos/π
-        pdf_spec = _div(D / (1.0 + lam_o), np.where(valid, 4.0 * cos_o, 0.0))
+        pdf_spec = _div(D / (1.0 + lam_o), np.where(valid & ~self.delta, 4.0 * cos_o, 0.0))
         pdf_diff = np.maximum(cos_i, 0.0) * INV_PI
-        pdf = np.where(valid, self.p_spec * pdf_spec + (1.0 - self.p_spec) * pdf_diff, 0.0)
+        p_diff = np.maximum(1.0 - self.p_spec - self.p_tr, 0.0)
+        pdf = np.where(valid, self.p_spec * pdf_spec + p_diff * pdf_diff, 0.0)
         return f, pdf, cos_i, valid
 
     def eval(self, wo: ArrayLike, wi: ArrayLike, adjoint: bool = False) -> F64:
@@ -374,19 +468,73 @@ class Bsdf:
             f, pdf, cos_i, valid = self._eval_pdf(wo, wi, flipped, adjoint)
             valid &= pdf > 0.0
             weight = np.where(valid[:, None], f * _div(np.abs(cos_i), pdf)[:, None], 0.0)
-        return BsdfSample(wi=wi, f=f, pdf=np.where(valid, pdf, 0.0), weight=weight,
-                          valid=valid)
+            sample = BsdfSample(wi=wi, f=f, pdf=np.where(valid, pdf, 0.0), weight=weight, valid=valid)
+            if self.has_delta:
+                sample = self._sample_delta(sample, wo, flipped, u, adjoint)
+        return sample
+
+    def _sample_delta(self, sample: BsdfSample, wo: F64, flipped: tuple[F64, F64], u: F64,
+                      adjoint: bool) -> BsdfSample:
+        """Replace the lanes of ``sample`` whose lobe choice u[:, 0] picked a delta lobe: the
+        perfect mirror of a smooth specular lobe (u0 < p_spec), or the glass lobe
+        (u0 ≥ 1 − p_tr): Fresnel reflection with probability F_r, refraction otherwise."""
+        ns, ng = flipped
+        u0 = u[:, 0]
+        mirror = (u0 < self.p_spec) & self.delta
+        glass = u0 >= 1.0 - self.p_tr
+        lanes = np.flatnonzero(mirror | glass)
+        if len(lanes) == 0:
+            return sample
+        n_l, g_l, wo_l = ns[lanes], ng[lanes], wo[lanes]
+        cos_o = dot(wo_l, n_l)
+        refl = 2.0 * cos_o[:, None] * n_l - wo_l
+        # Mirror: Schlick F at wo·n, chosen with probability p_spec
+        F_m = schlick_fresnel(cos_o, self.f0[lanes], self.f90[lanes])
+        w_m = F_m * _div(np.ones(len(lanes)), self.p_spec[lanes])[:, None]
+        # Glass: exact dielectric Fresnel; η_t/η_i = η entering (wo on ng's side), 1/η leaving
+        entering = dot(wo_l, self.ng[lanes]) > 0.0
+        eta_rel = np.where(entering, self.eta[lanes], 1.0 / self.eta[lanes])
+        Fr, cos_t = fresnel_dielectric(cos_o, eta_rel)
+        reflect = u[lanes, 1] < Fr
+        refr = (-wo_l / eta_rel[:, None]
+                + (cos_o / eta_rel - cos_t)[:, None] * n_l)
+        p_g = self.p_tr[lanes]
+        w_r = np.repeat(_div(self.kr[lanes], p_g)[:, None], 3, axis=1)
+        # Radiance (camera) transport through a refraction scales by 1/η_rel² [Veach 1997 §5.2]
+        scale = 1.0 if adjoint else 1.0 / (eta_rel * eta_rel)
+        w_t = self.kt[lanes] * _div(scale * np.ones(len(lanes)), p_g)[:, None]
+        is_m = mirror[lanes]
+        wi = np.where(is_m[:, None], refl, np.where(reflect[:, None], refl, refr))
+        wi = _normalize(wi)
+        weight = np.where(is_m[:, None], w_m, np.where(reflect[:, None], w_r, w_t))
+        prob = np.where(is_m, self.p_spec[lanes], p_g * np.where(reflect, Fr, 1.0 - Fr))
+        # Valid: reflections stay above the (flipped) geometric normal, refractions go below it
+        side = dot(wi, g_l)
+        ok = np.where(is_m | reflect, side > COS_EPS, side < -COS_EPS) & (cos_o > COS_EPS) & (prob > 0.0)
+        weight = np.where(ok[:, None], weight, 0.0)
+        cos_i = np.abs(dot(wi, n_l))
+        out = {k: np.array(getattr(sample, k), copy=True) for k in ("wi", "f", "pdf", "weight", "valid")}
+        out["wi"][lanes] = wi
+        out["weight"][lanes] = weight
+        out["pdf"][lanes] = np.where(ok, prob, 0.0)
+        out["f"][lanes] = weight * _div(np.where(ok, prob, 0.0), cos_i)[:, None]
+        out["valid"][lanes] = ok
+        delta = np.zeros(len(u0), bool)
+        delta[lanes] = True
+        return BsdfSample(**out, delta=delta)
 
     def albedo(self) -> F64:
         """Cheap reflectance estimate kd + F0, (N, 3), for Russian roulette and AOV passes.
 
-        Not the directional albedo: ignores Fresnel growth at grazing and Smith losses.
+        Not the directional albedo: ignores Fresnel growth at grazing and Smith losses; the
+        glass lobe counts with its transmission tint.
         """
-        return np.clip(self.kd + self.f0, 0.0, 1.0)
+        return np.clip(self.kd + self.f0 + self.kt, 0.0, 1.0)
 
 
 #: The per-lane array fields of :class:`Bsdf` (what ``subset`` selects).
-_FIELDS = ("ns", "ng", "kd", "f0", "f90", "alpha", "p_spec", "is_diffuse", "n_smooth", "shadowing")
+_FIELDS = ("ns", "ng", "kd", "f0", "f90", "alpha", "p_spec", "is_diffuse", "kt", "p_tr", "kr", "eta",
+           "delta", "n_smooth", "shadowing")
 
 
 def bsdf_max_value(table: MaterialTable, mat_idx: ArrayLike) -> F64:

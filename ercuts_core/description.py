@@ -117,6 +117,9 @@ class MaterialTable:
         emission: (M, 3) float32 emitted radiance [W·sr⁻¹·m⁻²] (colour × strength), two-sided.
         programs: per row, a shading program as JSON (format: :mod:`ercuts_core.shading`),
             or "" for the row's constants only. Default (``()``): "" for every row.
+        transmission: (M,) float32 Principled transmission weight in [0, 1] (1: glass).
+            Default (``()``): 0 for every row.
+        ior: (M,) float32 index of refraction of the glass lobe. Default (``()``): 1.5.
     """
 
     names: tuple[str, ...]
@@ -126,6 +129,8 @@ class MaterialTable:
     specular: F32
     emission: F32
     programs: tuple[str, ...] = ()
+    transmission: F32 | tuple = ()
+    ior: F32 | tuple = ()
 
     def __post_init__(self):
         object.__setattr__(self, "names", tuple(str(n) for n in self.names))
@@ -133,7 +138,11 @@ class MaterialTable:
         object.__setattr__(self, "programs", programs if programs else ("",) * len(self.names))
         object.__setattr__(self, "base_color", _f32(self.base_color, (3,)))
         object.__setattr__(self, "emission", _f32(self.emission, (3,)))
-        for name in ("roughness", "metallic", "specular"):
+        m = len(self.names)
+        for name, default in (("transmission", 0.0), ("ior", 1.5)):
+            if len(np.asarray(getattr(self, name)).reshape(-1)) == 0:
+                object.__setattr__(self, name, np.full(m, default, np.float32))
+        for name in ("roughness", "metallic", "specular", "transmission", "ior"):
             object.__setattr__(self, name, _f32(getattr(self, name), ()).reshape(-1))
 
     @property

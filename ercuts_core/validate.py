@@ -190,7 +190,8 @@ def _clean_materials(mats: MaterialTable, issues: list[Issue], n_textures: int =
     def fix(a, lo, hi, default):
         return np.clip(np.nan_to_num(a, nan=default, posinf=hi, neginf=lo), lo, hi)
     rows = [np.asarray(a, np.float64).reshape(mats.n_materials, -1) for a in
-            (mats.base_color, mats.roughness, mats.metallic, mats.specular, mats.emission)]
+            (mats.base_color, mats.roughness, mats.metallic, mats.specular, mats.emission,
+             mats.transmission, mats.ior)]
     bad = ~np.isfinite(np.hstack(rows)).all(axis=1)
     for i in np.flatnonzero(bad):
         issues.append(Issue("warning", "nonfinite_material",
@@ -211,6 +212,8 @@ def _clean_materials(mats: MaterialTable, issues: list[Issue], n_textures: int =
         np.vstack([np.where(np.isfinite(mats.emission), np.maximum(mats.emission, 0), 0),
                    [[0, 0, 0]]]).reshape(-1, 3),
         programs + ("",),
+        np.append(fix(mats.transmission, 0, 1, 0.0), 0.0),
+        np.append(fix(mats.ior, 1.0, 10.0, 1.5), 1.5),
     )
 
 

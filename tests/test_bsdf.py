@@ -1,4 +1,5 @@
-"""Tests of ercuts_core.bsdf (Lambert + GGX, two-sided, reflection only).
+"""Tests of ercuts_core.bsdf's continuous lobes (Lambert + GGX, two-sided; delta lobes:
+tests/test_delta_lobes.py).
 
 Modelled on pbrt-v4 ``bsdfs_test.cpp`` (chi² of sample() against pdf() for 5 incoming
 directions per BSDF, Šidák-corrected; energy conservation mean(f·cos/pdf) < 1.01) and
@@ -31,8 +32,10 @@ MATERIALS = {
     "glossy_0.6": ((0.2, 0.5, 0.8), 0.6, 0.0, 1.0),
     "metal_0.3": ((0.95, 0.64, 0.54), 0.3, 1.0, 0.5),
     "half_metal_0.45": ((0.9, 0.8, 0.3), 0.45, 0.5, 0.5),
-    "rough0_dielectric": ((0.5, 0.5, 0.5), 0.0, 0.0, 0.5),
-    "rough0_metal": ((0.9, 0.9, 0.9), 0.0, 1.0, 0.5),
+    # Roughness 0.02: the GGX alpha floor 1e-3, just above the delta threshold (roughness
+    # ≤ 0.01778 is a delta lobe: tests/test_delta_lobes.py)
+    "rough0_dielectric": ((0.5, 0.5, 0.5), 0.02, 0.0, 0.5),
+    "rough0_metal": ((0.9, 0.9, 0.9), 0.02, 1.0, 0.5),
 }
 #: Incoming directions as (cosθ, φ) in the shading frame; the last one is grazing.
 DIRECTIONS = [(1.0, 0.0), (0.8, 1.1), (0.5, 2.3), (0.2, 3.7), (0.05, 5.1)]
@@ -82,7 +85,7 @@ def adapter(material, wo, ns=NORMAL, ng=NORMAL, mutate=None):
 def chi2_domain(material, wo, ns=NORMAL):
     """Sphere grid with its pole on the mirror direction; zoomed for the alpha = 1e-3 lobes."""
     rough = MATERIALS[material][1] if isinstance(material, str) else material[1]
-    return SphericalDomain(frame_from_pole(reflect(wo, ns)), zoom=4.0 if rough == 0 else 1.0)
+    return SphericalDomain(frame_from_pole(reflect(wo, ns)), zoom=4.0 if rough < 0.0317 else 1.0)
 
 
 # ---------------------------------------------------------------------------------------

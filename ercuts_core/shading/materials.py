@@ -71,7 +71,9 @@ class SceneShading:
             self.table = {"base_color": mats.base_color.astype(np.float64),
                           "roughness": mats.roughness.astype(np.float64),
                           "metallic": mats.metallic.astype(np.float64),
-                          "specular": mats.specular.astype(np.float64)}
+                          "specular": mats.specular.astype(np.float64),
+                          "transmission": mats.transmission.astype(np.float64),
+                          "ior": mats.ior.astype(np.float64)}
 
     def _init_families(self) -> None:
         """Group rows whose programs differ only in constants (:func:`program.signature`):
@@ -144,7 +146,8 @@ class SceneShading:
         return out
 
     def bsdf_params(self, key: NDArray, p: NDArray, ns: NDArray, ng: NDArray) -> dict[str, NDArray]:
-        """Principled parameters per lane: base_color (N, 3), roughness, metallic, specular (N,).
+        """Principled parameters per lane: base_color (N, 3), roughness, metallic, specular,
+        transmission, ior (N,).
 
         Constant rows are gathered from the table; textured keys are evaluated per material.
         """

@@ -223,6 +223,8 @@ _PRINCIPLED = {
     "emission_strength": ("Emission Strength", "Emission Strength"),
     "alpha": ("Alpha", "Alpha"),
     "transmission": ("Transmission Weight", "Transmission"),
+    #: 3.x only (4.0 dropped it: the glass lobe uses Roughness); "" = no such socket
+    "transmission_roughness": ("", "Transmission Roughness"),
     "coat": ("Coat Weight", "Clearcoat"),
     "sheen": ("Sheen Weight", "Sheen"),
     "subsurface": ("Subsurface Weight", "Subsurface"),
@@ -233,7 +235,8 @@ _PRINCIPLED = {
 def principled_input(node, concept: str):
     """The Principled BSDF input socket for ``concept`` (see ``_PRINCIPLED``), or None."""
     new, old = _PRINCIPLED[concept]
-    return node.inputs.get(new if PRINCIPLED_V4 else old)
+    name = new if PRINCIPLED_V4 else old
+    return node.inputs.get(name) if name else None
 
 
 def principled_socket_name(concept: str) -> str:

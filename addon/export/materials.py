@@ -40,6 +40,9 @@ class MaterialRow:
     metallic: float = 0.0
     specular: float = 0.0
     emission: tuple = (0.0, 0.0, 0.0)
+    #: glass lobe weight (Principled Transmission Weight; 1 = Glass BSDF) and its IOR
+    transmission: float = 0.0
+    ior: float = 1.5
     #: shading program (JSON, ``ercuts_core.shading``); "" = the constants above
     program: str = ""
     uses_uvs: bool = False
@@ -218,4 +221,6 @@ class MaterialCollector:
             specular=np.array([r.specular for r in rows], np.float32),
             emission=np.array([r.emission for r in rows], np.float32).reshape(-1, 3),
             programs=tuple(r.program for r in rows),
+            transmission=np.array([r.transmission for r in rows], np.float32),
+            ior=np.array([r.ior for r in rows], np.float32),
         )

@@ -77,6 +77,12 @@ VERSION = 1
 GREY = (0.8, 0.8, 0.8)
 #: Luminance of linear Rec.709 (Blender's default OCIO config, Cycles' rgb_to_y).
 LUMA = (0.2126729, 0.7151522, 0.0721750)
+#: The core's glass-lobe IOR when nothing sets one (``MaterialTable.ior``'s default).
+DEFAULT_IOR = 1.5
+#: The core's accepted IOR range (``ercuts_core.bsdf.IOR_MIN/IOR_MAX``, rounded).
+IOR_RANGE = (1.0, 10.0)
+#: BSDF parameters of a :class:`Closure`: blended by Mix/Add only between sides with a BSDF.
+BSDF_PARAMS = ("roughness", "metallic", "specular", "transmission")
 #: Nesting limit for node groups (a deeper stack is reported as a cycle).
 MAX_GROUP_DEPTH = 32
 
@@ -178,6 +184,8 @@ class Closure:
     alpha: object = 1.0
     normal: object = None
     has_bsdf: bool = False
+    transmission: object = 0.0
+    ior: object = DEFAULT_IOR
 
 
 @dataclass
@@ -583,6 +591,10 @@ class _Compiler:
         t = node.type
         if t == "BSDF_PRINCIPLED":
             return self._principled(node, ctx)
+        if t in {"BSDF_GLOSSY", "BSDF_ANISOTROPIC"}:
+            return self._glossy(node, ctx)
+        if t in {"BSDF_GLASS", "BSDF_REFRACTION"}:
+            return self._glass(node, ctx)
         if t == "BSDF_DIFFUSE":
             rough = node.inputs.get("Roughness")
             if rough is not None and (_linked(rough) or float(rough.default_value) > 0.0):
@@ -620,8 +632,7 @@ class _Compiler:
 
     def _principled(self, node, ctx) -> Closure:
         get = lambda concept: compat.principled_input(node, concept)  # noqa: E731
-        for concept, label in (("transmission", "transmission"), ("coat", "coat"),
-                               ("sheen", "sheen"), ("subsurface", "subsurface")):
+        for concept, label in (("coat", "coat"), ("sheen", "sheen"), ("subsurface", "subsurface")):
             s = get(concept)
             if s is not None and (_linked(s) or float(s.default_value) > 0.0):
                 self.note(f"Principled {label} ignored")
@@ -629,8 +640,17 @@ class _Compiler:
         roughness = self.value(get("roughness"), ctx, "F")
         metallic = self.value(get("metallic"), ctx, "F")
         level = self.value(get("specular"), ctx, "F")
+        transmission = self._weight(get("transmission"), ctx)
+        # 3.x: IOR drives the glass lobe only (not read where nothing transmits)
+        ior = (self.value(get("ior"), ctx, "F") if compat.PRINCIPLED_V4 or transmission != 0.0
+               else DEFAULT_IOR)
+        if transmission != 0.0:
+            t_rough = get("transmission_roughness")   # 3.x only
+            if t_rough is not None and (_linked(t_rough) or float(t_rough.default_value) > 0.0):
+                self.note(f"Principled '{node.name}': Transmission Roughness ignored "
+                          f"(the glass lobe uses Roughness)")
+            self._check_ior(node, ior)
         if compat.PRINCIPLED_V4:
-            ior = self.value(get("ior"), ctx, "F")
             if is_ref(ior):  # ((ior-1)/(ior+1))² · 2 / 0.08 · level
                 f = self.div(self.sub(ior, 1.0), self.add(ior, 1.0, "F"))
                 f = self.mul(self.mul(f, f), 25.0)
@@ -646,7 +666,69 @@ class _Compiler:
             alpha = min(max(alpha, 0.0), 1.0)
         return Closure(base_color=base, roughness=roughness, metallic=metallic, specular=specular,
                        emission=self.scale(e_color, e_strength), alpha=alpha,
-                       normal=self.normal(get("normal"), ctx), has_bsdf=True)
+                       normal=self.normal(get("normal"), ctx), has_bsdf=True,
+                       transmission=transmission, ior=self._glass_ior(transmission, ior))
+
+    def _weight(self, socket, ctx):
+        """A [0, 1] weight input (constants clamped; None → 0)."""
+        if socket is None:
+            return 0.0
+        v = self.value(socket, ctx, "F")
+        return v if is_ref(v) else _clip01(v)
+
+    @staticmethod
+    def _glass_ior(transmission, ior):
+        """The glass lobe's IOR: a textured IOR only matters where something transmits."""
+        if not is_ref(transmission) and transmission == 0.0 and is_ref(ior):
+            return DEFAULT_IOR
+        return ior
+
+    def _check_ior(self, node, ior):
+        if not is_ref(ior) and not IOR_RANGE[0] <= ior <= IOR_RANGE[1]:
+            lo, hi = IOR_RANGE
+            self.note(f"'{node.name}': IOR {ior:g} outside [{lo:g}, {hi:g}], "
+                      f"rendered as {min(max(ior, lo), hi):g}")
+
+    def _microfacet_roughness(self, node, ctx, kind: str):
+        """Roughness of a Glossy/Anisotropic/Glass/Refraction node (3.x 'Sharp': 0), with a
+        note for a distribution the core does not have (it has GGX only)."""
+        dist = getattr(node, "distribution", "GGX")
+        if dist == "SHARP":
+            return 0.0
+        roughness = self.value(node.inputs["Roughness"], ctx, "F")
+        if dist in {"BECKMANN", "ASHIKHMIN_SHIRLEY"} and (is_ref(roughness) or roughness > 0.0):
+            label = {"BECKMANN": "Beckmann", "ASHIKHMIN_SHIRLEY": "Ashikhmin-Shirley"}[dist]
+            self.note(f"{kind} '{node.name}': {label} distribution rendered as GGX")
+        return roughness
+
+    def _glossy(self, node, ctx) -> Closure:
+        """Glossy (and 3.x Anisotropic) BSDF: a metal with F0 = Color (no Fresnel in Cycles'
+        node; the core's metallic Schlick curve rises to white at grazing angles only)."""
+        kind = "Anisotropic BSDF" if node.type == "BSDF_ANISOTROPIC" else "Glossy BSDF"
+        roughness = self._microfacet_roughness(node, ctx, kind)
+        aniso = node.inputs.get("Anisotropy")
+        if aniso is not None and roughness != 0.0 and (
+                _linked(aniso) or float(aniso.default_value) != 0.0):
+            self.note(f"{kind} '{node.name}': anisotropy ignored (isotropic GGX)")
+        return Closure(base_color=self.value(node.inputs["Color"], ctx, "C"), roughness=roughness,
+                       metallic=1.0, specular=0.5, normal=self.normal(node.inputs.get("Normal"), ctx),
+                       has_bsdf=True)
+
+    def _glass(self, node, ctx) -> Closure:
+        """Glass and Refraction BSDF: the core's glass lobe (transmission 1, metallic 0)."""
+        kind = "Glass BSDF" if node.type == "BSDF_GLASS" else "Refraction BSDF"
+        roughness = self._microfacet_roughness(node, ctx, kind)
+        ior = self.value(node.inputs["IOR"], ctx, "F")
+        self._check_ior(node, ior)
+        film = node.inputs.get("Thin Film Thickness")   # 4.2+
+        if film is not None and (_linked(film) or float(film.default_value) > 0.0):
+            self.note(f"{kind} '{node.name}': thin film ignored")
+        if node.type == "BSDF_REFRACTION":
+            self.note(f"Refraction BSDF '{node.name}' rendered as Glass BSDF "
+                      f"(its Fresnel reflection is kept)")
+        return Closure(base_color=self.value(node.inputs["Color"], ctx, "C"), roughness=roughness,
+                       metallic=0.0, specular=0.5, normal=self.normal(node.inputs.get("Normal"), ctx),
+                       has_bsdf=True, transmission=1.0, ior=ior)
 
     # ------------------------------------------------------------------ arithmetic with folding
     def mul(self, a, b):
@@ -749,14 +831,31 @@ class _Compiler:
         out.base_color = self.mix(t, a.base_color, b.base_color, "C")
         out.emission = self.mix(t, a.emission, b.emission, "C")
         if a.has_bsdf and b.has_bsdf:
-            for p in ("roughness", "metallic", "specular"):
+            for p in BSDF_PARAMS:
                 setattr(out, p, self.mix(t, getattr(a, p), getattr(b, p), "F"))
             out.normal = self.mix_normals(t, a.normal, b.normal)
+            out.ior = self.mix_ior(t, a, b)
         else:
-            src = a if a.has_bsdf or not b.has_bsdf else b
-            out.roughness, out.metallic, out.specular = src.roughness, src.metallic, src.specular
-            out.normal = src.normal
+            self._copy_bsdf(out, a if a.has_bsdf or not b.has_bsdf else b)
         return out
+
+    @staticmethod
+    def _copy_bsdf(out: Closure, src: Closure) -> None:
+        for p in BSDF_PARAMS + ("normal", "ior"):
+            setattr(out, p, getattr(src, p))
+
+    def mix_ior(self, t, a: Closure, b: Closure):
+        """The blended closure's IOR: the transmitting side's when only one side transmits
+        (a constant transmission 0), else blended with ``t`` like the other parameters."""
+        a_opaque = not is_ref(a.transmission) and a.transmission == 0.0
+        b_opaque = not is_ref(b.transmission) and b.transmission == 0.0
+        if a_opaque and not b_opaque:
+            return b.ior
+        if b_opaque and not a_opaque:
+            return a.ior
+        if a_opaque and b_opaque:
+            return a.ior if a.ior == b.ior else DEFAULT_IOR
+        return self.mix(t, a.ior, b.ior, "F")
 
     def add_closures(self, a: Closure, b: Closure) -> Closure:
         out = Closure(has_bsdf=a.has_bsdf or b.has_bsdf)
@@ -769,13 +868,12 @@ class _Compiler:
         else:
             out.alpha = min(max(s - 1.0, 0.0), 1.0)
         if a.has_bsdf and b.has_bsdf:
-            for p in ("roughness", "metallic", "specular"):
+            for p in BSDF_PARAMS:
                 setattr(out, p, self.mix(0.5, getattr(a, p), getattr(b, p), "F"))
             out.normal = self.mix_normals(0.5, a.normal, b.normal)
+            out.ior = self.mix_ior(0.5, a, b)
         else:
-            src = a if a.has_bsdf or not b.has_bsdf else b
-            out.roughness, out.metallic, out.specular = src.roughness, src.metallic, src.specular
-            out.normal = src.normal
+            self._copy_bsdf(out, a if a.has_bsdf or not b.has_bsdf else b)
         return out
 
     # ------------------------------------------------------------------ estimates
@@ -905,6 +1003,10 @@ def compile_material(mat, textures=None, space: ObjectSpace | None = None) -> Co
     surface = out.inputs.get("Surface")
     closure = comp.shader(surface, ())
     names = ("base_color", "roughness", "metallic", "specular", "emission", "alpha")
+    # transmission/ior: program outputs only when the material transmits somewhere (the row
+    # constants, transmission 0, say the rest; programs of opaque materials stay as before)
+    if is_ref(closure.transmission) or closure.transmission != 0.0:
+        names += ("transmission", "ior")
     refs = any(is_ref(getattr(closure, n)) for n in names)
     needs_program = refs or closure.normal is not None or (
         not is_ref(closure.alpha) and closure.alpha != 1.0)
@@ -931,6 +1033,8 @@ def _row_constants(c: Closure, comp: _Compiler | None = None) -> dict:
     metal = est(c.metallic, 0.0)
     spec = est(c.specular, 0.5)
     emit = est(c.emission, (0.0, 0.0, 0.0))
+    trans = est(c.transmission, 0.0)
+    ior = est(c.ior, DEFAULT_IOR)
     def vec(v):
         return np.asarray(v, float).reshape(-1)[:3] if np.ndim(v) else np.full(3, float(v))
 
@@ -943,6 +1047,8 @@ def _row_constants(c: Closure, comp: _Compiler | None = None) -> dict:
         metallic=_clip01(num(metal)),
         specular=max(num(spec), 0.0),
         emission=tuple(float(x) for x in np.maximum(vec(emit), 0.0)),
+        transmission=_clip01(num(trans)),
+        ior=float(min(max(num(ior), IOR_RANGE[0]), IOR_RANGE[1])),
     )
 
 

@@ -214,10 +214,10 @@ def test_rgb_node_through_reroute_is_read():
 
 
 def test_unsupported_shader_warns_once_and_falls_back_to_grey():
-    mat = h.node_material("Shiny", "ShaderNodeBsdfGlossy")
+    mat = h.node_material("Shiny", "ShaderNodeBsdfToon")
     h.plane("Second", material=mat, location=(0, 0, 1))  # used twice → still one warning
     row, warnings = _single_material(mat)
-    assert len(warnings) == 1 and "'Shiny'" in warnings[0] and "Glossy BSDF" in warnings[0]
+    assert len(warnings) == 1 and "'Shiny'" in warnings[0] and "Toon BSDF" in warnings[0]
     assert np.allclose(row["base"], 0.8) and np.allclose(row["emit"], 0)
 
 

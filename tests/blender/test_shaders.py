@@ -325,13 +325,13 @@ def test_unsupported_value_node_warns_once_naming_it():
 
 def test_unsupported_shader_in_a_mix_is_grey_with_one_warning():
     mat, nt, mix = _material("Half", "ShaderNodeMixShader", Fac=0.5)
-    glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
+    toon = nt.nodes.new("ShaderNodeBsdfToon")
     diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
     diffuse.inputs["Color"].default_value = (0, 0, 0, 1)
-    nt.links.new(glossy.outputs[0], mix.inputs[1])
+    nt.links.new(toon.outputs[0], mix.inputs[1])
     nt.links.new(diffuse.outputs[0], mix.inputs[2])
     compiled, _, _ = _compile(mat)
-    assert len(compiled.notes) == 1 and "Glossy" in compiled.notes[0]
+    assert len(compiled.notes) == 1 and "Toon" in compiled.notes[0]
     assert np.allclose(compiled.constants["base_color"], 0.4)
 
 

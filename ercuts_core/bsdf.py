@@ -545,14 +545,16 @@ def bsdf_max_value(table: MaterialTable, mat_idx: ArrayLike) -> F64:
     value max(F0, F90) = F90:  F90/(4π α²). The true supremum is unbounded at grazing angles
     (f_spec ∝ 1/(n·wo n·wi)), so this is an approximation for glossy materials: the
     lightcuts use the per-cluster bound :func:`ggx_cosine_bound` at glossy receivers
-    (:class:`ercuts_core.integrators.ercuts.lightcuts.GlossyReceivers`).
+    (:class:`ercuts_core.integrators.ercuts.lightcuts.GlossyReceivers`). Delta lobes are not
+    part of ``Bsdf.eval`` (no VPL lights them), so their bound is 0.
     """
     idx = np.asarray(mat_idx, dtype=np.int64).reshape(-1)
     n = idx.shape[0]
     up = np.tile([0.0, 0.0, 1.0], (n, 1))
     bsdf = Bsdf.from_table(table, idx, up, up)
     spec_peak = _div(np.ones(n), 4.0 * np.pi * bsdf.alpha ** 2)
-    spec = np.where(bsdf.is_diffuse[:, None], 0.0, np.maximum(bsdf.f0, bsdf.f90) * spec_peak[:, None])
+    no_spec = bsdf.is_diffuse | bsdf.delta          # delta lobes: not in eval, so no bound either
+    spec = np.where(no_spec[:, None], 0.0, np.maximum(bsdf.f0, bsdf.f90) * spec_peak[:, None])
     return bsdf.kd * INV_PI + spec
 
 

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .arrays import take_rows
-from .bsdf import Bsdf, bsdf_max_value
+from .bsdf import DELTA_ALPHA, Bsdf, bsdf_max_value
 from .camera import Camera
 from .description import SceneDescription
 from .lights import LightSet
@@ -94,6 +94,7 @@ class BuiltScene:
             self.tracer = AlphaTracer(self.tracer, self.shading.alpha, self.shading.row_alpha[self.tri_mat])
         self.camera = Camera(desc.camera)
         self.scene_radius = self.lights.radius
+        self.has_delta = _has_delta(desc.materials, self.tri_mat)
 
     def intersect(self, o: NDArray, d: NDArray, tmax=None) -> Surface:
         """Trace rays and return their surface interactions."""
@@ -178,3 +179,20 @@ class BuiltScene:
 
     def close(self) -> None:
         self.tracer.close()
+
+
+def _has_delta(mats, tri_mat: NDArray) -> bool:
+    """True when some triangle's material can have a delta lobe (:mod:`ercuts_core.bsdf`): a
+    glass lobe (transmission > 0, as a constant or a program output), or a smooth specular
+    lobe (roughness ≤ 0.01778 with specular or metallic > 0). Textured roughness is judged by
+    the row's constant: a roughness map that reaches 0 renders that lobe as GGX at α = 10⁻³
+    in ERCUTS's VPL part, not as a mirror."""
+    used = np.unique(tri_mat)
+    used = used[(used >= 0) & (used < mats.n_materials)]
+    r = np.asarray(mats.roughness, np.float64)[used]
+    smooth_spec = (r * r <= DELTA_ALPHA) & ((np.asarray(mats.specular)[used] > 0)
+                                            | (np.asarray(mats.metallic)[used] > 0))
+    glass = np.asarray(mats.transmission)[used] > 0
+    programs = [mats.programs[i] for i in used] if mats.has_programs else []
+    return bool(smooth_spec.any() or glass.any() or any('"transmission"' in p for p in programs))
+

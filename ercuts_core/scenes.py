@@ -48,6 +48,14 @@ class _Builder:
         for f in faces:
             self.quad(*(f[::-1] if inward else f), mat=mat, obj=obj)
 
+    def triangles(self, pos, tris, mat: int, obj: int) -> None:
+        """(V, 3) vertices and (T, 3) counter-clockwise triangles of one object."""
+        self.pos.append(np.asarray(pos, np.float64))
+        self.tris.append(np.asarray(tris, np.int64) + self.n)
+        self.mat += [mat] * len(tris)
+        self.obj += [obj] * len(tris)
+        self.n += len(pos)
+
     def mesh(self) -> MeshTable:
         return MeshTable(np.concatenate(self.pos), np.concatenate(self.tris), self.mat, self.obj)
 
@@ -314,9 +322,43 @@ def directly_lit(width: int = 160, height: int = 120) -> SceneDescription:
     return b.description(mats, cam)
 
 
+def specular_box(width: int = 160, height: int = 120) -> SceneDescription:
+    """The Cornell box of :func:`cornell_box` (emissive ceiling panel) with a mirror for the
+    tall block, turned by 30° (metallic 1, roughness 0, reflectance 0.9) and a glass ball (IOR 1.5,
+    roughness 0, radius 0.35 m, a level-3 icosphere) for the short one: mirrors, refraction,
+    caustics on the floor, light reflected onto the walls (issue 15)."""
+    b = _Builder()
+    white, red, green, lamp, mirror, glass = range(6)
+    room = b.object("Room")
+    b.quad((-1, 0, 1), (1, 0, 1), (1, 0, -1), (-1, 0, -1), white, room)
+    b.quad((-1, 2, -1), (1, 2, -1), (1, 2, 1), (-1, 2, 1), white, room)
+    b.quad((-1, 0, -1), (1, 0, -1), (1, 2, -1), (-1, 2, -1), white, room)
+    b.quad((-1, 0, 1), (-1, 0, -1), (-1, 2, -1), (-1, 2, 1), red, b.object("LeftWall"))
+    b.quad((1, 0, -1), (1, 0, 1), (1, 2, 1), (1, 2, -1), green, b.object("RightWall"))
+    block = _Builder()                      # the tall block, turned 30° about its vertical axis
+    block.box((-0.3, 0, -0.3), (0.3, 1.2, 0.3), mirror, 0)
+    c, sn = np.cos(np.radians(30)), np.sin(np.radians(30))
+    turn = np.array([[c, 0, sn], [0, 1, 0], [-sn, 0, c]])
+    m = block.mesh()
+    b.triangles(m.positions.astype(np.float64) @ turn.T + [-0.4, 0, -0.3], m.triangles, mirror,
+                b.object("MirrorBlock"))
+    v, t = icosphere(3)
+    b.triangles(v * 0.35 + [0.4, 0.35, 0.2], t, glass, b.object("GlassBall"))
+    b.quad((-0.25, 1.99, -0.2), (0.25, 1.99, -0.2), (0.25, 1.99, 0.2), (-0.25, 1.99, 0.2),
+           lamp, b.object("Lamp"))
+    names = ["White", "Red", "Green", "Lamp", "Mirror", "Glass"]
+    base = [[0.73] * 3, [0.63, 0.065, 0.05], [0.14, 0.45, 0.091], [0.78] * 3, [0.9] * 3, [1.0] * 3]
+    emission = np.zeros((6, 3))
+    emission[lamp] = [17.0, 12.0, 4.0]
+    mats = MaterialTable(names, base, [1, 1, 1, 1, 0, 0], [0, 0, 0, 0, 1, 0], [0, 0, 0, 0, 0.5, 0.5],
+                         emission, (), [0, 0, 0, 0, 0, 1], [1.5] * 6)
+    cam = _camera((0, 1, 3.9), (0, 1, 0), width, height, lens=30.0)
+    return SceneDescription(b.mesh(), mats, cam, object_names=tuple(b.names))
+
+
 SCENES = {"closed_room": closed_room, "s_corridor": s_corridor, "cornell_box": cornell_box, "furnace": furnace,
           "point_lit_box": point_lit_box, "door_ajar": door_ajar, "baffled_lamp": baffled_lamp,
-          "directly_lit": directly_lit}
+          "directly_lit": directly_lit, "specular_box": specular_box}
 
 #: The benchmark scenes, each also saved as ``blend_scenes/<name>.blend`` (160 × 120).
 BENCHMARK_SCENES = ("s_corridor", "cornell_box", "door_ajar", "baffled_lamp", "directly_lit")

@@ -4,7 +4,9 @@ Wavefront: all paths of a batch advance one bounce per iteration; each bounce is
 ``intersect`` call and one ``occluded`` call for the shadow rays. At every vertex the
 light is sampled (``LightSet.illuminate``) and the BSDF is sampled; emission found by a
 BSDF-sampled ray is weighted against next-event estimation with the power heuristic
-[Veach 1997 §9.2; pbrt-v3 PathIntegrator]. Lights that cannot be hit by rays (point,
+[Veach 1997 §9.2; pbrt-v3 PathIntegrator]; after a delta lobe (mirror, smooth glass), which
+light sampling cannot produce, the emission gets weight 1 [pbrt-v4 §13.3.1
+``specularBounce``]. Lights that cannot be hit by rays (point,
 spot, sun, area) get MIS weight 1 in next-event estimation. Russian roulette starts after
 ``rr_depth`` bounces with survival probability min(1, max(β)) [Arvo & Kirk 1990].
 
@@ -26,8 +28,38 @@ from ..vecmath import dot
 from .base import Integrator
 
 
+#: Which paths :class:`PathIntegrator` adds to the film (see its docstring).
+PATH_SETS = ("all", "direct_and_delta", "delta")
+
+
 class PathIntegrator(Integrator):
-    """Path tracing with NEE + MIS; see the module docstring."""
+    """Path tracing with NEE + MIS; see the module docstring.
+
+    ``paths`` selects the light paths whose contributions are added (the others are still
+    traced, so that later vertices are found): 'all'; 'delta', the paths with at least one
+    delta vertex (a mirror or smooth glass event: what ERCUTS's VPLs cannot carry); and
+    'direct_and_delta', those plus the paths with at most one scattering vertex (light seen
+    directly and scattered once: ERCUTS's direct-light passes). Without delta materials in the
+    scene (``BuiltScene.has_delta``) the last two stop after the first bounce.
+    """
+
+    def __init__(self, scene, settings, paths: str = "all"):
+        super().__init__(scene, settings)
+        if paths not in PATH_SETS:
+            raise ValueError(f"unknown path set {paths!r}; expected one of {PATH_SETS}")
+        self.paths = paths
+        self.max_depth = settings.max_depth
+        if paths != "all" and not scene.has_delta:
+            self.max_depth = min(self.max_depth, 1)
+
+    def _counted(self, scatter: int, seen: NDArray) -> NDArray | bool:
+        """Which of a bounce's contributions with ``scatter`` scattering vertices are added:
+        (N,) bool from ``seen`` (the path has a delta vertex), or True for all."""
+        if self.paths == "all":
+            return True
+        if self.paths == "delta":
+            return seen
+        return seen | (scatter <= 1)
 
     def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator) -> None:
         scene, s = self.scene, self.settings
@@ -38,9 +70,12 @@ class PathIntegrator(Integrator):
         beta = np.ones((n, 3))
         idx = np.arange(n)                 # lane → sample
         prev_pdf = np.zeros(n)             # BSDF pdf of the ray that led here (0: camera ray)
+        prev_delta = np.zeros(n, bool)     # that ray came from a delta lobe (no MIS: weight 1)
+        seen = np.zeros(n, bool)           # the path so far has a delta vertex
         prev_p = np.zeros((n, 3))
         alpha = None
-        for depth in range(s.max_depth + 1):
+        for depth in range(self.max_depth + 1):
+            counted = self._counted(depth, seen)
             surf = scene.intersect(o, d)
             if depth == 0:
                 alpha = self.alpha(surf)
@@ -49,9 +84,12 @@ class PathIntegrator(Integrator):
             if lights.env_light >= 0 and (~hit).any():
                 m = ~hit
                 Le = lights.env_radiance(d[m])
-                w = np.ones(int(m.sum())) if depth == 0 else power_heuristic(
-                    prev_pdf[m], lights.pdf_illuminate_env(d[m]))
+                w = np.ones(int(m.sum()))
+                if depth > 0:
+                    w = np.where(prev_delta[m], 1.0,
+                                 power_heuristic(prev_pdf[m], lights.pdf_illuminate_env(d[m])))
                 visible_env = not (depth == 0 and s.film_transparent)
+                w = w * (counted if np.isscalar(counted) else counted[m])
                 if visible_env:
                     L[min(depth, 2), idx[m]] += beta[m] * Le * w[:, None]
             if hit.any() and len(lights.emissive_tris):
@@ -61,25 +99,27 @@ class PathIntegrator(Integrator):
                     w = np.ones(int(em.sum()))
                     if depth > 0:
                         pdf_l = lights.pdf_illuminate_tri(prev_p[em], surf.prim[em], surf.p[em], surf.ng[em])
-                        w = power_heuristic(prev_pdf[em], pdf_l)
+                        w = np.where(prev_delta[em], 1.0, power_heuristic(prev_pdf[em], pdf_l))
+                    w = w * (counted if np.isscalar(counted) else counted[em])
                     L[min(depth, 2), idx[em]] += beta[em] * Le[em] * w[:, None]
             # Keep only paths that hit something and may scatter again.
-            if depth == s.max_depth:
+            if depth == self.max_depth:
                 if depth == 0:
                     keep = np.flatnonzero(hit)
                     self.record_first_hit(film, pix, keep, surf.subset(keep), None)
                 break
             keep = np.flatnonzero(hit)
-            surf, d, beta, idx = surf.subset(keep), d[keep], beta[keep], idx[keep]
+            surf, d, beta, idx, seen = surf.subset(keep), d[keep], beta[keep], idx[keep], seen[keep]
             wo = -d
             bsdf = scene.bsdf(surf.mat, surf.ns, surf.ng, surf.p)
             if depth == 0:
                 self.record_first_hit(film, pix, keep, surf, bsdf)
             if len(idx) == 0:
                 break
-            if not lights.empty:
+            nee = self._counted(depth + 1, seen)
+            if not lights.empty and np.any(nee):
                 L_nee = self._next_event(surf, wo, bsdf, rng)
-                L[min(depth + 1, 2), idx] += beta * L_nee
+                L[min(depth + 1, 2), idx] += beta * L_nee * np.reshape(nee, (-1, 1))
             # Sample the BSDF for the next bounce.
             bs = bsdf.sample(wo, rng.random((len(idx), 3)))
             beta = beta * bs.weight
@@ -93,8 +133,9 @@ class PathIntegrator(Integrator):
             if len(keep) == 0:
                 break
             surf, beta, idx = surf.subset(keep), beta[keep], idx[keep]
+            seen = seen[keep] | bs.is_delta[keep]
             d = bs.wi[keep]
-            prev_pdf, prev_p = bs.pdf[keep], surf.p
+            prev_pdf, prev_p, prev_delta = bs.pdf[keep], surf.p, bs.is_delta[keep]
             o = tracer.offset(surf.p, surf.ng, d)
         film.add_samples(pix, L.sum(axis=0), alpha, parts=L)
 

@@ -159,7 +159,8 @@ class Gather:
         out = np.zeros(len(g.pixel), bool)
         if len(h):
             bsdf = scene.bsdf(g.mat[h], g.ns[h], g.ng[h], g.p[h])
-            out[h] = ~bsdf.is_diffuse & (scene.roughness(g.mat[h], g.p[h]) < GLOSSY_ROUGHNESS)
+            out[h] = (~bsdf.is_diffuse & ~bsdf.delta    # delta lobes receive no VPL light
+                      & (scene.roughness(g.mat[h], g.p[h]) < GLOSSY_ROUGHNESS))
         return out
 
     def _shading_points(self, idx: NDArray) -> ShadingPoints:

@@ -180,7 +180,9 @@ def seeds_from_path_tracer(scene: BuiltScene, max_depth: int, rng: np.random.Gen
         _nee_seeds(scene, base, lanes, surf, wo, bsdf, beta, depth, rng, out_paths, out_e)
         bs = bsdf.sample(wo, rng.random((len(lanes), 3)))
         beta = beta * bs.weight
-        alive = np.flatnonzero(bs.valid & (beta.max(axis=1) > 0))
+        # a delta event ends the lane: paths through mirrors and glass are no seeds (the
+        # chains live on paths without delta vertices; ERCUTS path-traces those)
+        alive = np.flatnonzero(bs.valid & ~bs.is_delta & (beta.max(axis=1) > 0))
         lanes, surf, beta = lanes[alive], surf.subset(alive), beta[alive]
         d, prev_pdf = bs.wi[alive], bs.pdf[alive]
         o = tracer.offset(surf.p, surf.ng, d)

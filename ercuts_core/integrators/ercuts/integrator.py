@@ -182,6 +182,7 @@ class ErcutsIntegrator:
             self.schedule.grow_direct(1.0 - P / P_all if P_all > 0 else 0.0)
             with self._phase("direct"):
                 base, alpha = self._direct_light()
+            P = self._without_delta(P, base[2:])
         with self._phase("seeds"):
             window = self.scene.camera.window
             jitter = stratified_jitter(window.n_pixels, s.shading_samples, self.base_seed, self.iteration)
@@ -189,6 +190,10 @@ class ErcutsIntegrator:
             if s.direct_vpls:
                 base, alpha = self._direct_image(g, rng), self._alpha(g)
                 P = max(P_all - float(luminance(base.sum(axis=0)).sum()), 0.0)
+                if self.scene.has_delta:
+                    delta = self._delta_paths()
+                    base = base + delta
+                    P = self._without_delta(P, delta)
             stats["P"], stats["P_all"] = P, P_all
             seeds, starts = self._chain_seeds(P, rng)
         with self._phase("chains", check=False):  # 2. ER chains
@@ -250,16 +255,36 @@ class ErcutsIntegrator:
 
     def _direct_light(self) -> tuple[NDArray, NDArray]:
         """``direct_samples`` jittered passes of the light that reaches the camera directly or after
-        one scattering (path tracing with ``max_depth`` = 1: next-event estimation from every
-        light with MIS against BSDF sampling, emitters and world seen directly), fewer if the
-        phase's time share runs out; the rough image stays on screen meanwhile.
+        one scattering (path tracing: next-event estimation from every light with MIS against
+        BSDF sampling, emitters and world seen directly) and of every path through a mirror or
+        smooth glass (``PathIntegrator(paths='direct_and_delta')``: the VPLs cannot carry
+        light across a delta vertex), fewer if the phase's time share runs out; the rough
+        image stays on screen meanwhile.
 
         Returns the passes' (3, h·w, 3) light passes and (h·w,) coverage; the film goes."""
-        path = PathIntegrator(self.scene, self.settings.replace(max_depth=1))
+        path = PathIntegrator(self.scene, self.settings, paths="direct_and_delta")
         direct = self._passes(path, "Direct light", (0xD1,), "direct", show=False,
                               samples=self.settings.direct_samples)
         self.stats["direct_samples"] = direct.passes_done
         return direct.light_parts(), direct.alpha / max(direct.passes_done, 1)
+
+    def _delta_paths(self) -> NDArray:
+        """(3, h·w, 3) light passes of the paths through a mirror or smooth glass
+        (``direct_light='VPL'``; with 'NEE' :meth:`_direct_light` renders them)."""
+        path = PathIntegrator(self.scene, self.settings, paths="delta")
+        film = self._passes(path, "Direct light", (0xD2,), "direct", show=False,
+                            samples=self.settings.direct_samples)
+        return film.light_parts()
+
+    def _without_delta(self, P: float, delta_parts: NDArray) -> float:
+        """P less the energy of the paths with a delta vertex in ``delta_parts`` (n, h·w, 3)
+        (the rough BDPT image measures them too, but the chains and VPLs do not carry them:
+        the path tracer does). Clipped at 0; recorded as ``stats['P_delta']``."""
+        if not self.scene.has_delta:
+            return P
+        e = float(luminance(np.asarray(delta_parts, np.float64).sum(axis=0)).sum())
+        self.stats["P_delta"] = e
+        return max(P - e, 0.0)
 
     def _passes(self, integrator, phase: str, key: tuple, share: str, show: bool, samples: int) -> Film:
         """:func:`~ercuts_core.integrators.base.run_passes` within ``share``'s deadline."""

@@ -115,7 +115,8 @@ class GlossyReceivers:
         ns = bsdf.ns * sign[:, None]                     # the normal of Bsdf._eval_pdf
         align = dot(ns, n)
         cos_o = dot(wo, ns)
-        mask = ~bsdf.is_diffuse & (np.abs(align) >= 1.0 - 1e-12)   # equal up to rounding
+        # (a delta lobe is not a receiver: only its continuous part, the diffuse, is gathered)
+        mask = ~bsdf.is_diffuse & ~bsdf.delta & (np.abs(align) >= 1.0 - 1e-12)   # equal up to rounding
         lit = mask & (align > 0.0) & (cos_o > COS_EPS)
         spec = np.where(lit[:, None], np.maximum(bsdf.f0, bsdf.f90), 0.0)
         r = 2.0 * cos_o[:, None] * ns - wo

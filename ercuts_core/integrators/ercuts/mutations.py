@@ -239,7 +239,9 @@ def bidirectional_mutation(ctx: MutationContext, x: PathBatch, rng: np.random.Ge
         bs = bsdf.sample(take_rows(cur_wo, r), rng.random((len(r), 3)))
         o = scene.tracer.offset(slot_rows(y.p, r, j - 1), ng, bs.wi)
         surf = scene.intersect(o, bs.wi)
-        ok = bs.valid & surf.valid & (bs.pdf > 0)
+        # A delta event (mirror, glass) is a failed proposal: the chains live on paths
+        # without delta vertices (ERCUTS path-traces the others, integrator docstring)
+        ok = bs.valid & ~bs.is_delta & surf.valid & (bs.pdf > 0)
         valid[r[~ok]] = False
         r, bs_pdf, wi = r[ok], bs.pdf[ok], bs.wi[ok]
         s = surf.subset(np.flatnonzero(ok))

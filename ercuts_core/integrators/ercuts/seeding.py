@@ -11,11 +11,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...film import Film
+from ...sampling import luminance
 from ...lights import AREA, ENV, SUN, TRI
 from ...scene import BuiltScene
 from ...settings import RenderSettings
 from ..bdpt import BDPTIntegrator, Connection, Subpaths
-from .paths import PathBatch, is_target
+from .paths import PathBatch, contribution, is_target
 
 
 class SeedCollector:
@@ -120,4 +121,14 @@ def seed_paths(scene: BuiltScene, settings: RenderSettings, rng: np.random.Gener
     paths = PathBatch.concat([b[0] for b in parts])
     e = np.concatenate([b[1] for b in parts])
     keep = is_target(scene, paths, settings.direct_vpls) & (e > 0)
+    if scene.has_delta:
+        keep &= _no_delta_vertex(scene, paths)
     return paths.take(keep), e[keep]
+
+
+def _no_delta_vertex(scene: BuiltScene, paths: PathBatch) -> NDArray:
+    """(S,) False for paths through a mirror or smooth glass: their contribution, evaluated
+    without delta lobes (:func:`.paths.contribution`), is 0. Such BDPT paths are no seeds —
+    the chains live on paths without delta vertices and ERCUTS path-traces the others. (A
+    vertex on a material mixing delta and continuous lobes keeps its continuous part.)"""
+    return luminance(contribution(scene, paths)) > 0.0

@@ -6,8 +6,10 @@ scenes with constant materials export exactly as before issue 14). Images the pr
 read go to the scene's texture table (:mod:`.images`). Everything that cannot be
 translated gives *one* warning per material naming the nodes, and the documented fallback
 (the input's own value for an unsupported value node, grey diffuse for an unsupported
-shader). Materials without a node tree render their viewport colour as a diffuse, like
-Cycles; objects without a material get Cycles' default grey diffuse. Materials with an
+shader). Glass and mirrors (Principled Transmission/IOR, Glass, Refraction, Glossy)
+fill the table's ``transmission`` and ``ior`` columns (mapping in :mod:`.shaders`).
+Materials without a node tree render their viewport colour as a diffuse, like Cycles;
+objects without a material get Cycles' default grey diffuse. Materials with an
 object-space Normal Map get one row per object matrix.
 """
 from __future__ import annotations

@@ -6,8 +6,10 @@ input and produces
 * the row constants of today's ``MaterialTable`` (exactly today's values when the tree is
   constants only: Principled, Diffuse, Emission with RGB/Value nodes through reroutes), and
 * a program (JSON, version 1): value nodes only, in topological order, plus the outputs
-  ``base_color, roughness, metallic, specular, emission, alpha, normal``. The program is
-  ``""`` when every output is a constant, alpha is 1 and there is no normal input.
+  ``base_color, roughness, metallic, specular, emission, alpha, normal`` and, when the
+  material transmits anywhere (transmission not the constant 0), ``transmission, ior``
+  (opaque materials' programs are as before; their rows say transmission 0). The program
+  is ``""`` when every output is a constant, alpha is 1 and there is no normal input.
 
 What the compiler does
 ----------------------
@@ -23,28 +25,54 @@ What the compiler does
 * Implicit socket conversions are explicit nodes, as Cycles does them: colour → float is the
   luminance (``RGB_TO_BW``), vector → float the average (``VECT_MATH DOT_PRODUCT`` with
   (⅓, ⅓, ⅓)), float → colour/vector a broadcast (``COMBXYZ``). So a ref always has the
-  type of the socket or output it feeds: floats for roughness/metallic/specular/alpha,
-  3-vectors for base_color/emission/normal.
+  type of the socket or output it feeds: floats for
+  roughness/metallic/specular/alpha/transmission/ior, 3-vectors for base_color/emission/normal.
 * Closures are reduced here. Each shader socket becomes a set of lobe parameters with an
   opacity α (1 opaque, 0 = Transparent BSDF) and a flag "has a BSDF":
 
   - Principled: its inputs (3.x/4.x names via :mod:`..compat`); specular = the core's
     ``specular`` (F0 = 0.08·specular; 4.x: ((ior−1)/(ior+1))²·2·level / 0.08); emission =
-    colour × strength; alpha; normal. Transmission, coat, sheen, subsurface: one note.
+    colour × strength; alpha; normal; transmission = Transmission Weight (3.x
+    "Transmission") and ior = IOR: the core's glass lobe of weight (1 − metallic)·t, as in
+    Cycles (3.x's IOR drives only that lobe, so it is read only where something
+    transmits; a textured IOR with transmission 0 becomes the default 1.5). 3.x's
+    Transmission Roughness: one note when it is used (the glass lobe takes Roughness).
+    Coat, sheen, subsurface: one note.
+  - Glossy BSDF (and 3.x's Anisotropic BSDF): base colour = Color, roughness = Roughness
+    (3.x's 'Sharp' distribution: 0), metallic 1, specular 0.5 (unused at metallic 1).
+    Cycles' Glossy has no Fresnel (it reflects Color at every angle); the core's metal has
+    F0 = Color with Schlick's rise to white at grazing angles, exact for a white mirror and
+    head-on. Roughness ≤ 0.01778 is the core's perfect mirror. Every distribution renders
+    as single-scattering GGX: Beckmann / Ashikhmin-Shirley give one note (when rough),
+    Multiscatter GGX none (its extra energy at high roughness is the README's lobe gap);
+    anisotropy: one note, rendered isotropic.
+  - Glass BSDF: base colour = Color, roughness = Roughness ('Sharp': 0), ior = IOR,
+    metallic 0, transmission 1 (specular 0.5, unused: the opaque layer has weight 0).
+    The core tints the transmission with the colour and leaves the Fresnel reflection
+    white; Cycles tints both, so this is exact for white glass only. An IOR outside the
+    core's [1, 10] (e.g. < 1 for a bubble) is clamped, with a note. Thin film (4.2+): note.
+  - Refraction BSDF: as the Glass BSDF, with one note: Cycles' node refracts all of the
+    light (no Fresnel reflection), the core's glass lobe also reflects its Fresnel part
+    F_r (≈ 4 % head-on at IOR 1.5, all of it past the critical angle) and transmits
+    (1 − F_r)·Color. Only the reflected part differs; no closer mapping exists without a
+    transmission-only lobe in the core.
   - Diffuse: colour, normal (roughness 1, metallic 0, specular 0 as today; its own
     roughness — Oren–Nayar — ignored with a note). Emission: colour × strength, black base.
   - Transparent BSDF: α = 0 (a tinted one: a note; rendered as white transparency).
   - Mix Shader mix(f, A, B): α = mix(f, αA, αB); every other parameter is blended with
     t = f·αB / α (so a mix with a Transparent BSDF keeps the opaque side's parameters and
     the core's stochastic alpha does the weighting; t = f when αA = αB = 1). A side without
-    a BSDF (Emission, Transparent) does not blend roughness/metallic/specular/normal: the
-    other side's are used; base colours and emission are always blended. Exact for
-    diffuse/diffuse, emission and transparency mixes; mixes of two different GGX lobes
-    are approximated by one lobe with blended parameters.
+    a BSDF (Emission, Transparent) does not blend the BSDF parameters
+    roughness/metallic/specular/transmission/ior/normal: the other side's are used; base
+    colours and emission are always blended. The IOR of a mix where one side does not
+    transmit (constant transmission 0) is the transmitting side's, else it is blended.
+    Exact for diffuse/diffuse, emission and transparency mixes; mixes of two different GGX
+    lobes (or of glass and an opaque lobe with different colours) are approximated by one
+    lobe with blended parameters (Mix(Diffuse, Glass, 0.3) is Principled transmission 0.3).
   - Add Shader: base colours and emissions add; α = clamp(αA + αB − 1, 0, 1) (Cycles adds
-    the transparent weights); roughness/metallic/specular/normal from the side with a BSDF,
-    the mean of both when both have one.
-  - Anything else (Glossy, Glass, Refraction, Translucent, SSS, Toon, Hair, Volume, …):
+    the transparent weights); roughness/metallic/specular/transmission/normal from the side
+    with a BSDF, the mean of both when both have one (ior as for Mix, at t = ½).
+  - Anything else (Translucent, SSS, Toon, Sheen, Hair, Volume, …):
     one note naming the node and Cycles' grey diffuse (today's policy).
 * Value nodes follow the table of ``ercuts_core.shading``. Map Range (float, linear) and
   Clamp are compiled into MATH nodes. Texture Coordinate Object / Generated / Normal are
@@ -193,7 +221,8 @@ class Compiled:
     """Result of :func:`compile_material`.
 
     Attributes:
-        constants: the row's values (base_color, roughness, metallic, specular, emission);
+        constants: the row's values (base_color, roughness, metallic, specular, emission,
+            transmission, ior);
             outputs that are refs get an estimate (image means, socket values).
         program: JSON string, or "" when the row's constants say everything.
         notes: what could not be translated (one entry per node/issue).

@@ -23,7 +23,7 @@ V = bpy.app.version
 def _material(name, shader, **inputs):
     mat = h.node_material(name, shader, **inputs)
     nt = mat.node_tree
-    node = next(n for n in nt.nodes if n.type != "OUTPUT_MATERIAL")   # 4.x+: Glossy is ShaderNodeBsdfAnisotropic
+    node = next(n for n in nt.nodes if n.type != "OUTPUT_MATERIAL")   # 4.x+: not by bl_idname
     return mat, nt, node
 
 

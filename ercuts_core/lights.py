@@ -679,6 +679,74 @@ class LightSet:
             out[spread] *= area_spread.attenuation(cos[spread], self.ar_half[j], self.ar_k[j])[:, None]
         return out
 
+    @property
+    def has_shapes(self) -> bool:
+        """Some light has a shape rays can meet (:meth:`radiance_along`): an area light, a
+        point/spot light with a radius or a sun with an angle."""
+        return bool(len(self.ar_c) or self.pt_soft.any() or self.sun_cone.any())
+
+    def radiance_along(self, o: NDArray, d: NDArray, t_max: NDArray) -> NDArray:
+        """(N, 3) radiance reaching ray origins ``o`` along unit ``d`` (N, 3) from the lights
+        that are not scene geometry — area lights (front side, spread included), point and
+        spot lights with a radius (:mod:`.sphere_lights`: the sphere, or the disk facing
+        ``o``) and suns with an angle (their cone, only for rays with ``t_max`` = inf) —
+        nearer than ``t_max`` (N,) [m]; unoccluded up to t_max by construction.
+
+        Next-event estimation is the only other way to reach these lights, and it cannot
+        follow a delta lobe: the integrators add this after a mirror or glass event (the
+        lights a mirror shows, as Cycles renders them). Emissive meshes and the world are
+        hit as geometry/misses and are not included."""
+        n = len(o)
+        out = np.zeros((n, 3))
+        t_best = np.asarray(t_max, np.float64).copy()
+        for i in range(len(self.ar_c)):                    # few lights: a loop over lights
+            t, ab = self._area_hit(i, o, d)
+            inside = np.where(self.ar_ellipse[i], (ab ** 2).sum(axis=1) <= 1.0,
+                              (np.abs(ab) <= 1.0).all(axis=1))
+            hit = inside & (t > 0) & (t < t_best)
+            if hit.any():
+                out[hit] = self.area_radiance(np.full(int(hit.sum()), i), -d[hit])
+                t_best[hit] = t[hit]
+        for j in np.flatnonzero(self.pt_soft):
+            t = self._soft_point_hit(j, o, d)
+            hit = (t > 0) & (t < t_best)
+            if hit.any():
+                r = self.pt_radius[j]
+                spot = self.spot_factor(np.full(int(hit.sum()), j), -d[hit])
+                out[hit] = self.pt_I[j] * (spot / (np.pi * r * r))[:, None]
+                t_best[hit] = t[hit]
+        for j in np.flatnonzero(self.sun_cone):
+            cos = dot(-d, np.broadcast_to(-self.sun_dir[j], d.shape))
+            hit = ~np.isfinite(t_best) & (1.0 - cos <= self.sun_omc[j])
+            out[hit] += self.sun_L[j]
+        return out
+
+    def _area_hit(self, i: int, o: NDArray, d: NDArray) -> tuple[NDArray, NDArray]:
+        """Ray distances t (N,) to area light i's plane (inf when parallel) and the hit's
+        coordinates (N, 2) in units of its half axes u, v."""
+        n, c, u, v = self.ar_n[i], self.ar_c[i], self.ar_u[i], self.ar_v[i]
+        den = d @ n
+        t = np.divide((c - o) @ n, den, out=np.full(len(o), np.inf), where=np.abs(den) > 1e-12)
+        q = o + np.where(np.isfinite(t), t, 0.0)[:, None] * d - c
+        ab = np.stack([(q @ u) / max(u @ u, 1e-300), (q @ v) / max(v @ v, 1e-300)], axis=1)
+        return t, ab
+
+    def _soft_point_hit(self, j: int, o: NDArray, d: NDArray) -> NDArray:
+        """Ray distances (N,) to soft point light j (its sphere, or its disk facing the ray
+        origin), inf on a miss or from inside the sphere."""
+        c, r = self.pt_pos[j], self.pt_radius[j]
+        oc = c - o
+        if self.pt_sphere[j]:
+            b = np.einsum("ij,ij->i", oc, d)
+            disc = b * b - (np.einsum("ij,ij->i", oc, oc) - r * r)
+            t = b - np.sqrt(np.maximum(disc, 0.0))
+            return np.where((disc >= 0) & (t > 0), t, np.inf)
+        m, dist = normalize(-oc)                           # the disk faces the origin
+        den = np.einsum("ij,ij->i", d, m)
+        t = np.divide(dist, -den, out=np.full(len(o), np.inf), where=den < -1e-12)
+        q = o + np.where(np.isfinite(t), t, 0.0)[:, None] * d - c
+        return np.where(np.einsum("ij,ij->i", q, q) <= r * r, t, np.inf)
+
     def pdf_illuminate_vertex(self, light: NDArray, x: NDArray, p: NDArray) -> NDArray:
         """(N,) density with which :meth:`illuminate` from receivers ``x`` picks the light
         vertex ``p`` of ``light``, in the vertex's own measure: area (area lights — the

@@ -74,6 +74,33 @@ def test_mirror_reflects_the_emitter_exactly(integrator):
     np.testing.assert_allclose(r.image[..., :3].reshape(-1, 3), np.tile(F * LE, (W * H, 1)), rtol=2e-5)
 
 
+def mirror_and_lights(R=(0.9, 0.6, 0.3)) -> SceneDescription:
+    """The mirror of :func:`mirror_scene` showing, instead of an emissive mesh, an area light
+    (rectangle, x < 0 half of the view) and a sphere light (x > 0 half)."""
+    from dataclasses import replace
+    from ercuts_core.description import AreaLights, PointLights
+    mats = MaterialTable(("Mirror",), [R], [0], [1], [0.5], np.zeros((1, 3)))
+    desc = _scene([([(-2, 2, -2), (-2, -2, 2), (2, -2, 2), (2, 2, -2)], 0)], mats)
+    area = AreaLights([[-1.25, 3, 0]], [[1.0, 0, 0]], [[0, 0, 1.0]], [[0, -1, 0]], [[LE] * 3], [0], [1])
+    # sphere light radius 2 at y = 6 (I = L·π r²), covering x ∈ [0.4, 0.6] of the mirror's view
+    r = 2.0
+    pts = PointLights([[2.5, 6, 0]], [[LE * np.pi * r * r] * 3], [[0, -1, 0]], [-1.0], [0.0], [r], [1], [True])
+    return replace(desc, area_lights=area, point_lights=pts)
+
+
+@pytest.mark.parametrize("integrator", ["PATH", "ERCUTS"])
+def test_mirror_shows_area_and_sphere_lights(integrator):
+    R = np.array([0.9, 0.6, 0.3])
+    r = render(mirror_and_lights(R), RenderSettings(integrator=integrator, samples=2, rough_samples=2,
+                                                    direct_samples=2, max_depth=4, seed=3))
+    img = r.image[..., :3]
+    F = schlick_fresnel(np.array([np.sqrt(0.5)]), R[None, :], np.ones((1, 3)))[0]
+    # ortho view x ∈ [−0.5, 0.5]: the area light covers x ∈ [−2.25, −0.25] (columns 0–3), the
+    # sphere (centre x = 2.5, r = 2 at y = 6; the reflected rays go straight up) x ≥ 0.5: none
+    np.testing.assert_allclose(img[:, :4].reshape(-1, 3), np.tile(F * LE, (4 * H, 1)), rtol=2e-5)
+    np.testing.assert_allclose(img[:, 5:], 0.0, atol=1e-7)
+
+
 @pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
 def test_glass_slab_transmits_one_minus_f_over_one_plus_f(integrator):
     spp = 64

@@ -80,6 +80,8 @@ class PathIntegrator(Integrator):
             if depth == 0:
                 alpha = self.alpha(surf)
             hit = surf.valid
+            if depth > 0 and lights.has_shapes and prev_delta.any():
+                self._lights_seen(L[min(depth, 2)], idx, o, d, surf, prev_delta & counted, beta)
             # Emission seen by this ray: environment on misses, emissive triangles on hits.
             if lights.env_light >= 0 and (~hit).any():
                 m = ~hit
@@ -138,6 +140,17 @@ class PathIntegrator(Integrator):
             prev_pdf, prev_p, prev_delta = bs.pdf[keep], surf.p, bs.is_delta[keep]
             o = tracer.offset(surf.p, surf.ng, d)
         film.add_samples(pix, L.sum(axis=0), alpha, parts=L)
+
+    def _lights_seen(self, L: NDArray, idx: NDArray, o: NDArray, d: NDArray, surf, lanes: NDArray,
+                     beta: NDArray) -> None:
+        """Add to L[idx] the area, soft point and sun-cone lights that the rays (o, d) of
+        ``lanes`` (N,) bool meet before their hit: after a delta event next-event estimation
+        cannot reach them, so this is their only estimator there (weight 1)."""
+        r = np.flatnonzero(lanes)
+        if len(r) == 0:
+            return
+        t = np.where(surf.valid[r], surf.t[r], np.inf)
+        L[idx[r]] += beta[r] * self.scene.lights.radiance_along(o[r], d[r], t)
 
     def _next_event(self, surf, wo: NDArray, bsdf: Bsdf, rng: np.random.Generator) -> NDArray:
         """(N, 3) direct light at the surfaces: f·|cos|·Li·V·w / pdf."""

@@ -117,6 +117,8 @@ class Gather:
         sweep = _Sweep(self, vpls, tree, gmax, schedule, stats, pts_all)
         t0 = time.perf_counter()
         L, cut, done_pt, done = sweep.run(0, show)
+        if len(vpls) == 0 and not clock.cancelled:
+            done_pt[:] = True       # no VPL light anywhere: every point is complete (with 0)
         passes = 1.0
         if s.gather == "STOCHASTIC" and done == len(pts_all) and len(pts_all):
             L, passes = self._more_passes(sweep, L, time.perf_counter() - t0, schedule, show, done_pt)

@@ -18,8 +18,9 @@ algorithm.md §C]:
   batched BSDF evaluation and one batched shadow-ray query: s = 0 (the camera subpath
   hit an emitter), s = 1 (next-event estimation with a freshly sampled light point),
   t = 1 (light tracing, splatted to the film) and the general s, t ≥ 2 connection.
-  Rows whose connection leaves a vertex on the side opposite to its path (f = 0 for the
-  reflection-only BSDF) or, for t = 1, outside the view are dropped before any BSDF work;
+  Rows whose connection leaves a vertex on the side opposite to its path (f = 0: the
+  non-delta lobes only reflect; transmission is the glass lobe's, which is delta) or, for
+  t = 1, outside the view are dropped before any BSDF work;
   MIS weights and shadow rays are computed only for rows with a non-zero contribution.
 * **MIS.** Weights come from ratios of reverse to forward densities along the full path,
   as in pbrt-v3 ``MISWeight``, with the **power heuristic** (β = 2, Veach/Mitsuba;
@@ -53,9 +54,17 @@ Conventions shared with the path tracer (:mod:`.path`, the oracle):
 * Shading normals: light-subpath vertices use Veach's adjoint correction
   |wo·ns||wi·ng| / (|wo·ng||wi·ns|) (pbrt-v3 ``CorrectShadingNormal``, Importance mode);
   connection cosines use the shading normal, densities the geometric normal.
-* The BSDF has no delta lobes, so the only zero densities are delta light endpoints
-  (whose MIS terms are skipped); a zero *reverse* density means that the other strategy
-  cannot produce the path and is kept as 0 (pbrt's remap0 is not needed).
+* Delta vertices (perfect mirrors, smooth glass; pbrt-v3/v4 ``Vertex::delta``): a walk
+  step that sampled a delta lobe marks its vertex ``delta`` and stores 0 as the forward
+  density of the next vertex and the reverse density of the previous one; the throughput
+  takes the sample's weight as usual. No connection (s = 1, t = 1, general) is made to or
+  from a vertex whose BSDF is purely delta (``Bsdf.is_delta``, pbrt ``IsConnectible``);
+  a vertex with delta and continuous lobes connects through its continuous part and is
+  delta only as sampled. MIS skips the hypothetical strategies that would connect at a
+  delta vertex and counts the delta zeros as ratio 1 (pbrt ``remap0``), so emission seen
+  through specular chains only (a lamp in a mirror, behind glass) gets weight 1. Other
+  zero *reverse* densities mean that the other strategy cannot produce the path and stay
+  0; a zero forward density (delta lights, delta neighbours) counts as 1.
 
 Debugging: ``BDPTIntegrator(..., debug_strategies=True)`` accumulates each strategy's
 MIS-weighted contribution in ``strategy_images[(s, t)]`` ((n_window_pixels, 3) sums, in
@@ -175,6 +184,10 @@ class Subpaths:
         g_prev: (V, N) view of ``data``: the factor converting a solid-angle density at vertex k toward k − 1
             into an area density at k − 1 (|cos at k−1|/d², 1/d² or 1 for points/infinite).
         env: (V, N) camera vertex made by an escaped ray (an environment-light endpoint).
+        delta: (V, N) the walk sampled a delta lobe at the vertex (pbrt ``Vertex::delta``);
+            then pdf_fwd of vertex k + 1 and pdf_rev of vertex k − 1 are 0.
+        connectible: (V, N) False where every lobe of the vertex's BSDF is a delta lobe
+            (``Bsdf.is_delta``, pbrt ``IsConnectible``); True where no BSDF was built.
         count: (N,) number of vertices (vertex 0 always exists).
         on_surface0, infinite0: (N,) vertex 0 lies on a surface / is at infinity.
         raster: (N, 2) camera subpaths: full-frame raster position of the camera sample.
@@ -191,6 +204,8 @@ class Subpaths:
         self.pdf_fwd = np.zeros((V, N))
         self.pdf_rev = np.zeros((V, N))
         self.env = np.zeros((V, N), bool)
+        self.delta = np.zeros((V, N), bool)
+        self.connectible = np.ones((V, N), bool)
         self.count = np.ones(N, np.int64)
         self.on_surface0 = np.zeros(N, bool)
         self.infinite0 = np.zeros(N, bool)
@@ -203,7 +218,7 @@ class Subpaths:
         return VertexRows(take_rows(self.data.reshape(-1, _WIDTH), k * self.n_lanes + lane))
 
     def at(self, name: str, k: NDArray, lane: NDArray) -> NDArray:
-        """Gather the (V, N) attribute ``name`` (pdf_fwd, pdf_rev, mat, prim, env) for rows."""
+        """Gather the (V, N) attribute ``name`` (pdf_fwd, pdf_rev, mat, prim, env, delta) for rows."""
         return take_rows(getattr(self, name).reshape(-1), k * self.n_lanes + lane)
 
     def surface(self, k: int) -> NDArray:
@@ -448,14 +463,17 @@ class BDPTIntegrator(Integrator):
                 self.record_first_hit(film, pix, keep, surf, bsdf)
             if last:
                 break
+            path.connectible[k, lanes] = ~bsdf.is_delta
             # Sample the BSDF for the next vertex
             bs = bsdf.sample(wo, rng.random((len(lanes), 3)), adjoint=importance)
             beta = beta * bs.weight
             if importance and self.shading_normals:
+                # Absolute cosines: also right for a refraction (wi on the other side)
                 beta = beta * _adjoint_correction(ns, ng, wo, bs.wi)[:, None]
             alive = bs.valid & (beta.max(axis=1) > 0)
-            # Reverse density of the previous vertex (area measure there)
-            path.pdf_rev[k - 1, lanes] = np.where(alive, bsdf.pdf(bs.wi, wo) * g_prev, 0.0)
+            fwd_next, rev = self._walk_densities(bsdf, bs, wo, alive)
+            path.delta[k, lanes] = bs.is_delta & alive
+            path.pdf_rev[k - 1, lanes] = rev * g_prev          # area measure at vertex k − 1
             if k >= s.rr_depth:
                 q = beta.max(axis=1)
                 if importance:
@@ -466,18 +484,40 @@ class BDPTIntegrator(Integrator):
                 alive &= survive
             keep = np.flatnonzero(alive)
             lanes, beta, beta0 = lanes[keep], beta[keep], beta0[keep]
-            d, pdf_dir = bs.wi[keep], bs.pdf[keep]
+            d, pdf_dir = bs.wi[keep], fwd_next[keep]
             o = tracer.offset(p[keep], ng[keep], d)
         return alpha
 
+    @staticmethod
+    def _walk_densities(bsdf: Bsdf, bs, wo: NDArray, alive: NDArray) -> tuple[NDArray, NDArray]:
+        """Solid-angle densities of a walk step: (forward density of the sampled direction,
+        reverse density toward the previous vertex), both (M,).
+
+        After a delta event both are 0 (pbrt-v3/v4 ``RandomWalk``: ``if specular:
+        v.delta = true; pdfFwd = pdfRev = 0``): the discrete probability is not a density,
+        and the MIS weights treat these zeros as ratio 1 and skip the strategies that
+        would connect at the delta vertex (:meth:`_mis_weight`) [Veach 1997 §10.3.5].
+        """
+        ok = alive & ~bs.is_delta
+        return np.where(ok, bs.pdf, 0.0), np.where(ok, bsdf.pdf(bs.wi, wo), 0.0)
+
     # ================================================================== MIS
-    def _ratio_terms(self, rev: NDArray, fwd: NDArray, valid: NDArray, skip: NDArray) -> NDArray:
+    def _ratio_terms(self, rev: NDArray, fwd: NDArray, valid: NDArray, skip: NDArray,
+                     remap_rev: NDArray) -> NDArray:
         """Σ_m (Π_{j ≤ m} rev_j/fwd_j)^β over the valid, non-skipped entries.
 
+        Zero densities next to a delta vertex count as 1 (pbrt-v3 ``remap0``): the delta
+        factor is common to every strategy that can produce the path and cancels
+        [Veach 1997 §10.3.5]. A zero forward density is always remapped; a zero reverse
+        density only where ``remap_rev`` (the delta vertex's neighbour): elsewhere it means
+        that the hypothetical strategy cannot produce the path (pbrt's remap0 would count
+        it and lose energy), so it stays 0.
+
         Args:
-            rev, fwd, valid, skip: (K, R) per subpath vertex and row, ordered from the
-                connection vertex (m = 0) toward the subpath's start.
+            rev, fwd, valid, skip, remap_rev: (K, R) per subpath vertex and row, ordered
+                from the connection vertex (m = 0) toward the subpath's start.
         """
+        rev = np.where(remap_rev & (rev == 0), 1.0, rev)
         # fmin also maps nan (inf/inf from degenerate geometry) to the cap.
         ratio = np.fmin(rev / np.where(fwd != 0, fwd, 1.0), _RATIO_MAX)
         use = valid & ~skip
@@ -488,6 +528,24 @@ class BDPTIntegrator(Integrator):
             term = r if self.mis_power == 1.0 else r ** self.mis_power
             total += np.where(use[m], term, 0.0)
         return total
+
+    @staticmethod
+    def _delta_flags(path: Subpaths | None, i: NDArray, lane: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        """(K, R) delta flags of subpath vertices i, i − 1 and i + 1 for MIS rows (all False
+        without a subpath; indices clamped, out-of-range entries are masked by the caller).
+
+        The connection vertex (m = 0) is never delta for the strategy being weighted
+        (pbrt-v3 MISWeight: ``pt->delta = qs->delta = false``).
+        """
+        if path is None:
+            z = np.zeros(i.shape, bool)
+            return z, z, z
+        last = path.delta.shape[0] - 1
+        here = path.at("delta", np.clip(i, 0, last), lane)
+        here[0] = False
+        prev = path.at("delta", np.clip(i - 1, 0, last), lane)
+        nxt = path.at("delta", np.clip(i + 1, 0, last), lane)
+        return here, prev, nxt
 
     def _mis_weight(self, cam: Subpaths, lig: Subpaths | None, lane: NDArray, s: NDArray,
                     t: NDArray, pt_rev: NDArray, ptm_rev: NDArray, qs_rev: NDArray | None = None,
@@ -500,6 +558,12 @@ class BDPTIntegrator(Integrator):
         forward density of light vertex s−1 (the sampled light for s = 1). Entries that do
         not apply to a row (e.g. ``ptm_rev`` when t = 2) are ignored. ``no_s0``: per row,
         the light cannot be reached by the s = 0 strategy.
+
+        Delta vertices (pbrt-v3/v4): the hypothetical strategy with i vertices on a
+        subpath connects its vertices i − 1 and i, so it is skipped when either is delta;
+        the zero densities the walk stored next to a delta vertex count as ratio 1
+        (:meth:`_ratio_terms`). The replaced entries m = 0, 1 are recomputed densities,
+        never delta zeros.
         """
         total = np.zeros(len(lane))
         if len(lane) == 0:
@@ -514,9 +578,13 @@ class BDPTIntegrator(Integrator):
             rev[0] = pt_rev
             if t_max >= 2:
                 rev[1] = ptm_rev
+            here, prev, nxt = self._delta_flags(cam, i, lane)
+            nxt[:2] = False
+            skip = here | prev
             # i = 1 is the t = 1 strategy, absent for a delta-direction (orthographic) camera
-            skip = (i == 1) if self.camera.is_delta_direction else np.zeros_like(valid)
-            total += self._ratio_terms(rev, fwd, valid, skip)
+            if self.camera.is_delta_direction:
+                skip |= i == 1
+            total += self._ratio_terms(rev, fwd, valid, skip, nxt)
         # Hypothetical strategies with fewer light vertices: i = s−1 … 0
         s_max = int(s.max())
         if s_max >= 1:
@@ -530,9 +598,12 @@ class BDPTIntegrator(Integrator):
             rev[0], fwd[0] = qs_rev, qs_fwd
             if s_max >= 2:
                 rev[1] = qsm_rev
-            # i = 0 is the s = 0 strategy: impossible for delta and AREA lights
-            skip = (i == 0) & no_s0[None, :]
-            total += self._ratio_terms(rev, fwd, valid, skip)
+            here, prev, nxt = self._delta_flags(lig, i, lane)
+            nxt[:2] = False
+            # i = 0 is the s = 0 strategy: impossible for delta and AREA lights (pbrt:
+            # the predecessor of light vertex 0 is "delta" for a delta light)
+            skip = here | np.where(i == 0, no_s0[None, :], prev)
+            total += self._ratio_terms(rev, fwd, valid, skip, nxt)
         return np.where(s + t == 2, 1.0, 1.0 / (1.0 + total))
 
     # ================================================================== connection rows
@@ -550,23 +621,26 @@ class BDPTIntegrator(Integrator):
         return _Rows(parts)
 
     def _rows_s1(self, cam: Subpaths) -> _Rows:
-        """s = 1: every surface vertex of the camera subpaths up to depth max_depth."""
+        """s = 1: every connectible surface vertex of the camera subpaths up to depth max_depth."""
         last = min(self.n_cam, self.settings.max_depth + 1)
-        return _Rows([(1, t, np.flatnonzero(cam.surface(t - 1))) for t in range(2, last + 1)])
+        return _Rows([(1, t, np.flatnonzero(cam.surface(t - 1) & cam.connectible[t - 1]))
+                      for t in range(2, last + 1)])
 
     def _rows_general(self, cam: Subpaths, lig: Subpaths) -> _Rows:
-        """s, t ≥ 2 with s + t − 2 ≤ max_depth."""
+        """s, t ≥ 2 with s + t − 2 ≤ max_depth, both vertices connectible (pbrt IsConnectible)."""
         parts = []
         for t in range(2, self.n_cam + 1):
-            on_cam = cam.surface(t - 1)
+            on_cam = cam.surface(t - 1) & cam.connectible[t - 1]
             for s in range(2, min(self.n_light, self.settings.max_depth + 2 - t) + 1):
-                parts.append((s, t, np.flatnonzero(on_cam & (lig.count > s - 1))))
+                on_lig = (lig.count > s - 1) & lig.connectible[s - 1]
+                parts.append((s, t, np.flatnonzero(on_cam & on_lig)))
         return _Rows(parts)
 
     def _rows_t1(self, lig: Subpaths) -> _Rows:
-        """t = 1: light vertices 1 … max_depth."""
+        """t = 1: connectible light vertices 1 … max_depth."""
         last = min(self.n_light, self.settings.max_depth + 1)
-        return _Rows([(s, 1, np.flatnonzero(lig.count > s - 1)) for s in range(2, last + 1)])
+        return _Rows([(s, 1, np.flatnonzero((lig.count > s - 1) & lig.connectible[s - 1]))
+                      for s in range(2, last + 1)])
 
     # ================================================================== strategies
     def _hit_emitter(self, cam: Subpaths, lane: NDArray, s: NDArray, t: NDArray):
@@ -611,7 +685,7 @@ class BDPTIntegrator(Integrator):
         bsdf = self.scene.bsdf(cam.at("mat", k, lane), ns, ng, p)
         f, pdf_fwd = _eval_pdf(bsdf, wo, wi)
         c = pt.beta * f * ls.Li[idx] * (np.abs(dot(ns, wi)) / ls.pdf_w[idx])[:, None]
-        keep = np.flatnonzero(c.max(axis=1) > 0)
+        keep = np.flatnonzero((c.max(axis=1) > 0) & ~bsdf.is_delta)
         idx = idx[keep]
         lane, s, t, k, c = lane[keep], s[keep], t[keep], k[keep], c[keep]
         p, ng, wo, pdf_fwd = p[keep], ng[keep], wo[keep], pdf_fwd[keep]
@@ -674,7 +748,7 @@ class BDPTIntegrator(Integrator):
             fq = fq * _adjoint_correction(qns, qng, qwo, w)[:, None]
         G = np.abs(dot(qns, w)) * np.abs(dot(pns, w)) / d2
         c = qs.beta * fq * fp * pt.beta * G[:, None]
-        keep = np.flatnonzero(c.max(axis=1) > 0)
+        keep = np.flatnonzero((c.max(axis=1) > 0) & ~bq.is_delta & ~bp.is_delta)
         idx = idx[keep]
         lane, s, t, kq, kp, c, w, d2 = (a[keep] for a in (lane, s, t, kq, kp, c, w, d2))
         qp, qng, qwo, pp, png, pwo = (a[keep] for a in (qp, qng, qwo, pp, png, pwo))
@@ -710,7 +784,7 @@ class BDPTIntegrator(Integrator):
         if self.shading_normals:
             f = f * _adjoint_correction(ns, ng, wo, wi)[:, None]
         c = qs.beta * f * (np.abs(dot(ns, wi)) * factor)[:, None]
-        keep = np.flatnonzero(c.max(axis=1) > 0)
+        keep = np.flatnonzero((c.max(axis=1) > 0) & ~bsdf.is_delta)
         if len(keep) == 0:
             return
         lane, s, t, k, c, p, ng, wo, wi = (a[keep] for a in (lane, s, t, k, c, p, ng, wo, wi))

@@ -182,17 +182,17 @@ class BuiltScene:
 
 
 def _has_delta(mats, tri_mat: NDArray) -> bool:
-    """True when some triangle's material can have a delta lobe (:mod:`ercuts_core.bsdf`): a
-    glass lobe (transmission > 0, as a constant or a program output), or a smooth specular
-    lobe (roughness ≤ 0.01778 with specular or metallic > 0). Textured roughness is judged by
-    the row's constant: a roughness map that reaches 0 renders that lobe as GGX at α = 10⁻³
-    in ERCUTS's VPL part, not as a mirror."""
+    """True when some triangle's material can have a delta lobe (:mod:`ercuts_core.bsdf`):
+    roughness ≤ 0.01778 with a specular, metallic or glass lobe, or a transmission program
+    output (conservative). Textured roughness is judged by the row's constant: a roughness map
+    that reaches 0 renders that lobe as GGX at α = 10⁻³ in ERCUTS's VPL part, not as a mirror.
+    Rough glass is a continuous lobe: ERCUTS carries it like a glossy one."""
     used = np.unique(tri_mat)
     used = used[(used >= 0) & (used < mats.n_materials)]
     r = np.asarray(mats.roughness, np.float64)[used]
-    smooth_spec = (r * r <= DELTA_ALPHA) & ((np.asarray(mats.specular)[used] > 0)
-                                            | (np.asarray(mats.metallic)[used] > 0))
-    glass = np.asarray(mats.transmission)[used] > 0
+    smooth = r * r <= DELTA_ALPHA
+    smooth_spec = smooth & ((np.asarray(mats.specular)[used] > 0) | (np.asarray(mats.metallic)[used] > 0))
+    glass = smooth & (np.asarray(mats.transmission)[used] > 0)
     programs = [mats.programs[i] for i in used] if mats.has_programs else []
     return bool(smooth_spec.any() or glass.any() or any('"transmission"' in p for p in programs))
 

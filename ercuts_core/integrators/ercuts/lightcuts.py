@@ -116,7 +116,9 @@ class GlossyReceivers:
         align = dot(ns, n)
         cos_o = dot(wo, ns)
         # (a delta lobe is not a receiver: only its continuous part, the diffuse, is gathered)
-        mask = ~bsdf.is_diffuse & ~bsdf.delta & (np.abs(align) >= 1.0 - 1e-12)   # equal up to rounding
+        # (nor a glass lobe: its bound is bsdf_max_value's)
+        mask = (~bsdf.is_diffuse & ~bsdf.delta & (bsdf.p_tr <= 0.0)
+                & (np.abs(align) >= 1.0 - 1e-12))   # equal up to rounding
         lit = mask & (align > 0.0) & (cos_o > COS_EPS)
         spec = np.where(lit[:, None], np.maximum(bsdf.f0, bsdf.f90), 0.0)
         r = 2.0 * cos_o[:, None] * ns - wo

@@ -18,9 +18,9 @@ algorithm.md §C]:
   batched BSDF evaluation and one batched shadow-ray query: s = 0 (the camera subpath
   hit an emitter), s = 1 (next-event estimation with a freshly sampled light point),
   t = 1 (light tracing, splatted to the film) and the general s, t ≥ 2 connection.
-  Rows whose connection leaves a vertex on the side opposite to its path (f = 0: the
-  non-delta lobes only reflect; transmission is the glass lobe's, which is delta) or, for
-  t = 1, outside the view are dropped before any BSDF work;
+  Rows whose connection leaves a vertex without a glass lobe on the side opposite to its
+  path (f = 0 there; rough glass transmits through ``eval``) or, for t = 1, outside the
+  view are dropped before any BSDF work;
   MIS weights and shadow rays are computed only for rows with a non-zero contribution.
 * **MIS.** Weights come from ratios of reverse to forward densities along the full path,
   as in pbrt-v3 ``MISWeight``, with the **power heuristic** (β = 2, Veach/Mitsuba;
@@ -188,6 +188,9 @@ class Subpaths:
             then pdf_fwd of vertex k + 1 and pdf_rev of vertex k − 1 are 0.
         connectible: (V, N) False where every lobe of the vertex's BSDF is a delta lobe
             (``Bsdf.is_delta``, pbrt ``IsConnectible``); True where no BSDF was built.
+        reflect_only: (V, N) the vertex's BSDF has no glass lobe, so f = 0 unless wo and wi
+            lie on one side (connection rows are pre-filtered by side only there; rough
+            glass transmits through ``eval``); False where no BSDF was built.
         count: (N,) number of vertices (vertex 0 always exists).
         on_surface0, infinite0: (N,) vertex 0 lies on a surface / is at infinity.
         raster: (N, 2) camera subpaths: full-frame raster position of the camera sample.
@@ -206,6 +209,7 @@ class Subpaths:
         self.env = np.zeros((V, N), bool)
         self.delta = np.zeros((V, N), bool)
         self.connectible = np.ones((V, N), bool)
+        self.reflect_only = np.zeros((V, N), bool)
         self.count = np.ones(N, np.int64)
         self.on_surface0 = np.zeros(N, bool)
         self.infinite0 = np.zeros(N, bool)
@@ -464,6 +468,7 @@ class BDPTIntegrator(Integrator):
             if last:
                 break
             path.connectible[k, lanes] = ~bsdf.is_delta
+            path.reflect_only[k, lanes] = bsdf.p_tr <= 0.0
             # Sample the BSDF for the next vertex
             bs = bsdf.sample(wo, rng.random((len(lanes), 3)), adjoint=importance)
             beta = beta * bs.weight
@@ -677,7 +682,8 @@ class BDPTIntegrator(Integrator):
         pt = cam.rows(t - 1, lane)
         ls = lights.illuminate(pt.p, rng.random(m), rng.random((m, 2)))
         # Light samples that carry energy, on the side the camera path arrived from
-        idx = np.flatnonzero(ls.valid & (dot(pt.wo, pt.ng) * dot(ls.wi, pt.ng) > 0))
+        same_side = dot(pt.wo, pt.ng) * dot(ls.wi, pt.ng) > 0
+        idx = np.flatnonzero(ls.valid & (same_side | ~cam.at("reflect_only", t - 1, lane)))
         lane, s, t, pt = lane[idx], s[idx], t[idx], pt.take(idx)
         k = t - 1
         p, ng, ns, wo = pt.p, pt.ng, pt.ns, pt.wo
@@ -732,8 +738,9 @@ class BDPTIntegrator(Integrator):
         d2 = np.einsum("ij,ij->i", v, v)
         # A reflection-only BSDF is 0 unless the connection leaves each vertex on the side
         # its path arrived from (geometric normals): skip those rows before any BSDF work.
-        idx = np.flatnonzero((dot(qs.wo, qs.ng) * dot(v, qs.ng) > 0)
-                             & (dot(pt.wo, pt.ng) * dot(v, pt.ng) < 0) & (d2 > 0))
+        q_ok = (dot(qs.wo, qs.ng) * dot(v, qs.ng) > 0) | ~lig.at("reflect_only", s - 1, lane)
+        p_ok = (dot(pt.wo, pt.ng) * dot(v, pt.ng) < 0) | ~cam.at("reflect_only", t - 1, lane)
+        idx = np.flatnonzero(q_ok & p_ok & (d2 > 0))
         lane, s, t, v, d2 = lane[idx], s[idx], t[idx], v[idx], d2[idx]
         qs, pt = qs.take(idx), pt.take(idx)
         kq, kp = s - 1, t - 1
@@ -769,7 +776,8 @@ class BDPTIntegrator(Integrator):
         qs = lig.rows(s - 1, lane)
         conn = camera.connect(qs.p, camera.lens_samples(rng, len(lane)))
         # In the view, and leaving on the side the light path arrived from (else f = 0)
-        idx = np.flatnonzero(conn.valid & (dot(qs.wo, qs.ng) * dot(conn.wi, qs.ng) > 0))
+        same_side = dot(qs.wo, qs.ng) * dot(conn.wi, qs.ng) > 0
+        idx = np.flatnonzero(conn.valid & (same_side | ~lig.at("reflect_only", s - 1, lane)))
         if len(idx) == 0:
             return
         lane, s, t, qs = lane[idx], s[idx], t[idx], qs.take(idx)

@@ -88,7 +88,7 @@ def mirror_and_lights(R=(0.9, 0.6, 0.3)) -> SceneDescription:
     return replace(desc, area_lights=area, point_lights=pts)
 
 
-@pytest.mark.parametrize("integrator", ["PATH", "ERCUTS"])
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
 def test_mirror_shows_area_and_sphere_lights(integrator):
     R = np.array([0.9, 0.6, 0.3])
     r = render(mirror_and_lights(R), RenderSettings(integrator=integrator, samples=2, rough_samples=2,

@@ -211,6 +211,9 @@ class Subpaths:
         self.connectible = np.ones((V, N), bool)
         self.reflect_only = np.zeros((V, N), bool)
         self.count = np.ones(N, np.int64)
+        #: (3, N, 3) camera subpaths: lights with a shape met after delta events only
+        #: (:meth:`BDPTIntegrator._lights_after_delta`), by path class
+        self.lights_seen = np.zeros((3, N, 3))
         self.on_surface0 = np.zeros(N, bool)
         self.infinite0 = np.zeros(N, bool)
         self.raster = np.zeros((N, 2))
@@ -312,6 +315,7 @@ class BDPTIntegrator(Integrator):
             if not self.camera.is_delta_direction:
                 for lane, s, t in self._rows_t1(lig).chunks(self.max_rows):
                     self._connect_camera(film, lig, no_s0, lane, s, t, rng)
+        L += cam.lights_seen
         film.add_samples(pix, L.sum(axis=0), alpha, parts=L)
         if self.on_connections is not None:
             self.on_connections(cam, lig, self._pending)
@@ -410,11 +414,14 @@ class BDPTIntegrator(Integrator):
         n_vertices = path.p.shape[0]
         beta0 = np.maximum(beta.max(axis=1), 1e-300)       # for the light's relative RR
         alpha = None
+        all_delta = np.ones(len(lanes), bool)              # every vertex so far a delta event
         for k in range(1, n_vertices):
             if len(lanes) == 0:
                 break
             surf = scene.intersect(o, d)
             hit = surf.valid
+            if not importance and k >= 2:
+                self._lights_after_delta(path, k, lanes, all_delta, o, d, surf, beta)
             if film is not None and k == 1:
                 alpha = self.alpha(surf)
             # Escaped camera rays end on the environment light (an s = 0 vertex).
@@ -433,6 +440,7 @@ class BDPTIntegrator(Integrator):
             if len(keep) == 0:
                 break
             lanes, d, beta, pdf_dir = lanes[keep], d[keep], beta[keep], pdf_dir[keep]
+            all_delta = all_delta[keep]
             beta0 = beta0[keep]
             surf = surf.subset(keep)
             p, ng, ns = surf.p, surf.ng, surf.ns
@@ -488,10 +496,26 @@ class BDPTIntegrator(Integrator):
                 beta = beta / np.where(survive, q, 1.0)[:, None]
                 alive &= survive
             keep = np.flatnonzero(alive)
+            all_delta = (all_delta & bs.is_delta)[keep]
             lanes, beta, beta0 = lanes[keep], beta[keep], beta0[keep]
             d, pdf_dir = bs.wi[keep], fwd_next[keep]
             o = tracer.offset(p[keep], ng[keep], d)
         return alpha
+
+    def _lights_after_delta(self, path: Subpaths, k: int, lanes: NDArray, all_delta: NDArray,
+                            o: NDArray, d: NDArray, surf, beta: NDArray) -> None:
+        """Camera rays (o, d) toward vertex k whose vertices 1 … k − 1 are all delta events:
+        add the area, soft point and sun-cone lights they meet before their hit
+        (:meth:`LightSet.radiance_along`) to ``path.lights_seen``, weight 1. No other strategy
+        makes such a path (no connection at a delta vertex; these lights are not geometry, so
+        s = 0 has no hit to find); a path with a non-delta vertex before the delta chain is
+        light tracing's (t = 1) and is left to it."""
+        lights = self.scene.lights
+        r = np.flatnonzero(all_delta)
+        if len(r) == 0 or not lights.has_shapes:
+            return
+        t = np.where(surf.valid[r], surf.t[r], np.inf)
+        path.lights_seen[path_class(k - 1), lanes[r]] += beta[r] * lights.radiance_along(o[r], d[r], t)
 
     @staticmethod
     def _walk_densities(bsdf: Bsdf, bs, wo: NDArray, alive: NDArray) -> tuple[NDArray, NDArray]:

@@ -1,5 +1,5 @@
 """Build and save the project's .blend scenes: the S-corridor (paper Fig. 1), a Cornell box and
-the benchmark scenes (door_ajar, baffled_lamp, directly_lit).
+the benchmark scenes (door_ajar, baffled_lamp, directly_lit, veach_room, mirror_glass_room).
 
 Run with either Blender (the benchmark scenes are converted from ``ercuts_core.scenes`` and
 need numpy, so give Debian's Blender the venv's site-packages):
@@ -116,6 +116,39 @@ def emitter_material(name, base, radiance):
     return mat
 
 
+def glass_material(name, color, roughness, ior):
+    """Glass BSDF (GGX): the core's glass row (transmission 1, metallic 0, specular 0.5)."""
+    mat, node = _material(name, color, "ShaderNodeBsdfGlass")
+    node.distribution = "GGX"
+    node.inputs["Color"].default_value = (*color, 1.0)
+    node.inputs["Roughness"].default_value = roughness
+    node.inputs["IOR"].default_value = ior
+    return mat
+
+
+def glossy_material(name, color, roughness):
+    """Glossy BSDF (GGX): the core's metal row (metallic 1, F0 = Color, specular 0.5)."""
+    mat, node = _material(name, color, "ShaderNodeBsdfGlossy")
+    node.distribution = "GGX"
+    node.inputs["Color"].default_value = (*color, 1.0)
+    node.inputs["Roughness"].default_value = roughness
+    return mat
+
+
+def core_material(mt, i):
+    """The Blender material for row ``i`` of the core's MaterialTable ``mt``: a Principled
+    emitter where it emits, a Glass BSDF where it transmits, a Glossy BSDF where it is a
+    metal (metallic 1), else a Diffuse BSDF."""
+    name, base = mt.names[i], tuple(map(float, mt.base_color[i]))
+    if mt.emission[i].max() > 0:
+        return emitter_material(name, base, tuple(map(float, mt.emission[i])))
+    if mt.transmission[i] > 0:
+        return glass_material(name, base, float(mt.roughness[i]), float(mt.ior[i]))
+    if mt.metallic[i] == 1.0:
+        return glossy_material(name, base, float(mt.roughness[i]))
+    return diffuse_material(name, base)
+
+
 def camera(eye, target, lens, sensor_width=36.0):
     cam = bpy.data.cameras.new("Camera")
     cam.lens = lens
@@ -229,7 +262,8 @@ def build_cornell_box():
 
 def build_from_core(name):
     """Convert the core's built-in scene ``name`` (160 × 120): one Blender object per core
-    object (its triangles), Diffuse BSDF or Principled emitter materials, the same camera."""
+    object (its triangles), Diffuse, Glass or Glossy BSDF or Principled emitter materials
+    (:func:`core_material`), the same camera."""
     import numpy as np
 
     from ercuts_core import scenes
@@ -237,9 +271,7 @@ def build_from_core(name):
     reset(name)
     desc = scenes.SCENES[name](160, 120)
     mt = desc.materials
-    mats = [emitter_material(n, tuple(map(float, mt.base_color[i])), tuple(map(float, mt.emission[i])))
-            if mt.emission[i].max() > 0 else diffuse_material(n, tuple(map(float, mt.base_color[i])))
-            for i, n in enumerate(mt.names)]
+    mats = [core_material(mt, i) for i in range(len(mt.names))]
     mesh = desc.mesh
     for oid, oname in enumerate(desc.object_names):
         tris = mesh.triangles[mesh.object_ids == oid]
@@ -555,7 +587,8 @@ def build_textured_bedroom():
 TEXTURED_SCENES = ("textured_living_room", "textured_bedroom")
 
 SCENES = {"s_corridor": build_s_corridor, "cornell_box": build_cornell_box,
-          **{n: (lambda n=n: build_from_core(n)) for n in ("door_ajar", "baffled_lamp", "directly_lit")},
+          **{n: (lambda n=n: build_from_core(n)) for n in ("door_ajar", "baffled_lamp", "directly_lit",
+                                                            "veach_room", "mirror_glass_room")},
           "textured_living_room": build_textured_living_room, "textured_bedroom": build_textured_bedroom}
 
 

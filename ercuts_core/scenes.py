@@ -362,3 +362,169 @@ SCENES = {"closed_room": closed_room, "s_corridor": s_corridor, "cornell_box": c
 
 #: The benchmark scenes, each also saved as ``blend_scenes/<name>.blend`` (160 × 120).
 BENCHMARK_SCENES = ("s_corridor", "cornell_box", "door_ajar", "baffled_lamp", "directly_lit")
+
+
+def _room_shell(b: _Builder, lo, hi, wall: int, floor: int, obj: int, front: int | None = None) -> None:
+    """A closed room (inward faces): the floor (−y face) in ``floor``, the front (+z) wall in
+    ``front`` (default ``wall``), the rest in ``wall``."""
+    x0, y0, z0 = lo
+    x1, y1, z1 = hi
+    b.quad((x0, y0, z1), (x1, y0, z1), (x1, y0, z0), (x0, y0, z0), floor, obj)      # floor, +y
+    b.quad((x0, y1, z0), (x1, y1, z0), (x1, y1, z1), (x0, y1, z1), wall, obj)      # ceiling, −y
+    b.quad((x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0), wall, obj)      # back, +z
+    b.quad((x1, y0, z1), (x0, y0, z1), (x0, y1, z1), (x1, y1, z1),
+           wall if front is None else front, obj)                                  # front, −z
+    b.quad((x0, y0, z1), (x0, y0, z0), (x0, y1, z0), (x0, y1, z1), wall, obj)      # left, +x
+    b.quad((x1, y0, z0), (x1, y0, z1), (x1, y1, z1), (x1, y1, z0), wall, obj)      # right, −x
+
+
+def _open_box(b: _Builder, lo, hi, mat: int, obj: int, open_face: int) -> None:
+    """An axis-aligned box (single-sided walls, seen from both sides) without face
+    ``open_face`` (the order of :meth:`_Builder.box`: −x, +x, −y, +y, −z, +z)."""
+    part = _Builder()
+    part.box(lo, hi, mat, 0)
+    m = part.mesh()
+    keep = [k for k in range(6) if k != open_face]
+    tris = np.concatenate([m.triangles[2 * k:2 * k + 2] for k in keep])
+    b.triangles(m.positions.astype(np.float64), tris, mat, obj)
+
+
+def _table(b: _Builder, x0, z0, x1, z1, h: float, top: float, leg: float, mat: int, obj: int) -> None:
+    """A table ``h`` high over x ∈ [x0, x1], z ∈ [z0, z1]: a top slab ``top`` thick and four
+    square legs ``leg`` wide, set 0.02 m in from its edges."""
+    b.box((x0, h - top, z0), (x1, h, z1), mat, obj)
+    for x, z in ((x0, z0), (x1 - leg, z0), (x0, z1 - leg), (x1 - leg, z1 - leg)):
+        b.box((x + 0.02, 0, z + 0.02), (x + leg - 0.02, h - top, z + leg - 0.02), mat, obj)
+
+
+def _egg(level: int = 3, height: float = 0.26, radius: float = 0.09) -> tuple[np.ndarray, np.ndarray]:
+    """An egg centred at the origin: an icosphere scaled to ``height`` along y, ``radius``
+    across, the top end 30 % narrower than the bottom one."""
+    v, t = icosphere(level)
+    taper = 1.0 - 0.15 * v[:, 1]
+    return np.stack([v[:, 0] * radius * taper, v[:, 1] * height / 2, v[:, 2] * radius * taper], 1), t
+
+
+def _mirror_glass_table(rows) -> MaterialTable:
+    """Material table from (name, kind, base colour[, emission or roughness]) rows; kind
+    'diffuse' (Diffuse BSDF), 'lamp' (a Principled emitter without specular), 'mirror' (a
+    Glossy BSDF: metallic 1, specular 0.5, roughness ``rows[3]`` or 0) or 'glass' (a Glass
+    BSDF: transmission 1, IOR 1.5, specular 0.5, roughness ``rows[3]`` or 0) — each exactly the
+    row the add-on exports for that Blender node (blend_scenes/build_scenes.py)."""
+    n = len(rows)
+    rough, metal, spec, trans = np.ones(n), np.zeros(n), np.zeros(n), np.zeros(n)
+    emission = np.zeros((n, 3))
+    for i, r in enumerate(rows):
+        kind = r[1]
+        if kind == "lamp":
+            emission[i] = r[3]
+        elif kind in ("mirror", "glass"):
+            rough[i] = r[3] if len(r) > 3 else 0.0
+            spec[i] = 0.5
+            metal[i] = 1.0 if kind == "mirror" else 0.0
+            trans[i] = 1.0 if kind == "glass" else 0.0
+    return MaterialTable([r[0] for r in rows], [r[2] for r in rows], rough, metal, spec, emission,
+                         (), trans, np.full(n, 1.5))
+
+
+def veach_room(width: int = 160, height: int = 120) -> SceneDescription:
+    """A room in the spirit of Veach's bidirectional test room (Veach 1997, fig. 10.3):
+    benchmark for indirect light through glass.
+
+    Room x ∈ [−2.5, 2.5], z ∈ [−2, 2], 2.7 m high (walls 0.7, floor 0.5). The only light is
+    a 0.3 m × 0.3 m emissive quad (radiance 300) facing up inside the open-topped shade of a
+    floor lamp (1.65 m, the shade's rim 0.25 m above the lamp): it lights a patch of the
+    ceiling, and the room is lit by light bounced off it. On the table in front of the camera
+    stand a smooth glass egg (0.26 m tall, IOR 1.5, a level-3 icosphere) and a chrome ball
+    (metallic 1, roughness 0, reflectance 0.9); a cabinet against the left wall.
+    """
+    b = _Builder()
+    wall, floor, wood, shade, glass, chrome, blue, lamp = range(8)
+    H = 2.7
+    _room_shell(b, (-2.5, 0, -2), (2.5, H, 2), wall, floor, b.object("Room"))
+    _table(b, -0.1, -1.3, 1.3, -0.4, 0.76, 0.04, 0.08, wood, b.object("Table"))
+    v, t = _egg(3)
+    b.triangles(v + [0.45, 0.76 + 0.131, -0.75], t, glass, b.object("GlassEgg"))
+    v, t = icosphere(2)
+    b.triangles(v * 0.07 + [0.85, 0.76 + 0.0705, -0.6], t, chrome, b.object("ChromeBall"))
+    b.box((-2.45, 0, -1.6), (-1.9, 0.9, -0.4), blue, b.object("Cabinet"))
+    lx, lz, ly = 1.9, -1.45, 1.65                         # the floor lamp: base, pole, shade
+    stand = b.object("LampStand")
+    b.box((lx - 0.15, 0, lz - 0.15), (lx + 0.15, 0.03, lz + 0.15), shade, stand)
+    b.box((lx - 0.02, 0.03, lz - 0.02), (lx + 0.02, ly - 0.02, lz + 0.02), shade, stand)
+    _open_box(b, (lx - 0.19, ly - 0.02, lz - 0.19), (lx + 0.19, ly + 0.25, lz + 0.19), shade,
+              b.object("LampShade"), open_face=3)
+    y = ly
+    b.quad((lx - 0.15, y, lz + 0.15), (lx + 0.15, y, lz + 0.15), (lx + 0.15, y, lz - 0.15),
+           (lx - 0.15, y, lz - 0.15), lamp, b.object("Lamp"))
+    mats = _mirror_glass_table([("Wall", "diffuse", [0.7, 0.7, 0.7]),
+                                ("Floor", "diffuse", [0.5, 0.5, 0.5]),
+                                ("Wood", "diffuse", [0.55, 0.35, 0.2]),
+                                ("Shade", "diffuse", [0.1, 0.1, 0.1]),
+                                ("Glass", "glass", [1.0, 1.0, 1.0]),
+                                ("Chrome", "mirror", [0.9, 0.9, 0.9]),
+                                ("Blue", "diffuse", [0.2, 0.3, 0.55]),
+                                ("Lamp", "lamp", [0.8, 0.8, 0.8], [300.0, 290.0, 260.0])])
+    cam = _camera((-0.55, 1.3, 0.55), (0.75, 1.0, -1.0), width, height, lens=28.0)
+    return b.description(mats, cam)
+
+
+def mirror_glass_room(width: int = 160, height: int = 120) -> SceneDescription:
+    """An interior with a wall mirror, a glass partition and a rough-glass ball, lit by a
+    lamp aimed at a wall (benchmark: indirect light seen in a mirror and through glass).
+
+    Room x ∈ [−2.5, 2.5], z ∈ [−2, 2], 2.6 m high (walls 0.7, floor 0.5). The only light is
+    a 0.6 m × 0.4 m emissive quad (radiance 200) on a stand 0.6 m from the right wall,
+    facing it, in a shallow shade (7 cm behind it) open only towards the wall (a wall washer): it
+    lights the right wall, and the room is lit by light bounced off it. The back wall holds a 2.4 m × 1.7 m mirror
+    (metallic 1, roughness 0, reflectance 0.9) in front of which a smooth glass partition
+    (1.6 m × 2 m, 4 cm thick, IOR 1.5) stands out from the left wall; on a low table a
+    rough-glass ball (roughness 0.3, a level-3 icosphere); a red sofa and a cabinet. The
+    camera looks at the mirror, which shows the room behind the camera.
+    """
+    b = _Builder()
+    wall, floor, wood, shade, mirror, glass, frosted, red, green, lamp = range(10)
+    H = 2.6
+    room = b.object("Room")
+    _room_shell(b, (-2.5, 0, -2), (2.5, H, 2), wall, floor, room, front=green)
+    b.box((-1.6, 0.5, -1.99), (0.8, 2.2, -1.97), mirror, b.object("Mirror"))
+    frame = b.object("MirrorFrame")
+    for lo, hi in (((-1.66, 0.44, -1.99), (0.86, 0.5, -1.95)), ((-1.66, 2.2, -1.99), (0.86, 2.26, -1.95)),
+                   ((-1.66, 0.5, -1.99), (-1.6, 2.2, -1.95)), ((0.8, 0.5, -1.99), (0.86, 2.2, -1.95))):
+        b.box(lo, hi, wood, frame)
+    b.box((-2.49, 0.06, -0.62), (-0.95, 2.0, -0.58), glass, b.object("GlassPartition"))
+    post = b.object("PartitionFrame")
+    b.box((-2.49, 0.0, -0.64), (-0.95, 0.06, -0.56), wood, post)
+    b.box((-0.95, 0.0, -0.64), (-0.89, 2.0, -0.56), wood, post)
+    _table(b, -0.2, -1.1, 0.8, -0.5, 0.45, 0.04, 0.08, wood, b.object("LowTable"))
+    v, t = icosphere(3)
+    b.triangles(v * 0.18 + [0.3, 0.45 + 0.181, -0.8], t, frosted, b.object("RoughGlassBall"))
+    sofa = b.object("Sofa")                                   # against the front wall
+    b.box((-1.8, 0, 1.1), (0.2, 0.42, 1.95), red, sofa)
+    b.box((-1.8, 0.42, 1.7), (0.2, 0.85, 1.95), red, sofa)
+    for x in (-1.8, 0.0):
+        b.box((x, 0.42, 1.1), (x + 0.2, 0.62, 1.7), red, sofa)
+    b.box((1.6, 0, -1.9), (2.45, 1.0, -1.3), wood, b.object("Cabinet"))
+    lx, ly, lz = 1.9, 1.5, 0.3                                # the wall washer, facing +x
+    _open_box(b, (lx - 0.07, ly - 0.25, lz - 0.35), (lx + 0.06, ly + 0.25, lz + 0.35), shade,
+              b.object("LampShade"), open_face=1)
+    b.quad((lx, ly - 0.2, lz + 0.3), (lx, ly - 0.2, lz - 0.3), (lx, ly + 0.2, lz - 0.3),
+           (lx, ly + 0.2, lz + 0.3), lamp, b.object("Lamp"))
+    stand = b.object("LampStand")
+    b.box((lx - 0.2, 0, lz - 0.2), (lx + 0.1, 0.03, lz + 0.2), shade, stand)
+    b.box((lx - 0.05, 0.03, lz - 0.02), (lx - 0.01, ly - 0.25, lz + 0.02), shade, stand)
+    mats = _mirror_glass_table([("Wall", "diffuse", [0.7, 0.7, 0.7]),
+                                ("Floor", "diffuse", [0.5, 0.5, 0.5]),
+                                ("Wood", "diffuse", [0.55, 0.35, 0.2]),
+                                ("Shade", "diffuse", [0.1, 0.1, 0.1]),
+                                ("Mirror", "mirror", [0.9, 0.9, 0.9]),
+                                ("Glass", "glass", [1.0, 1.0, 1.0]),
+                                ("RoughGlass", "glass", [0.75, 0.88, 1.0], 0.3),
+                                ("Red", "diffuse", [0.6, 0.12, 0.1]),
+                                ("Green", "diffuse", [0.45, 0.6, 0.5]),
+                                ("Lamp", "lamp", [0.8, 0.8, 0.8], [120.0, 114.0, 102.0])])
+    cam = _camera((1.3, 1.45, 1.6), (-0.5, 1.1, -2.0), width, height, lens=22.0)
+    return b.description(mats, cam)
+
+
+SCENES.update(veach_room=veach_room, mirror_glass_room=mirror_glass_room)

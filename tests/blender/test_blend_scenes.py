@@ -14,9 +14,11 @@ from ercuts_core import scenes
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 BLEND_DIR = os.path.join(ROOT, "blend_scenes")
-NAMES = list(scenes.BENCHMARK_SCENES)  # s_corridor, cornell_box and the benchmark scenes
+#: s_corridor, cornell_box and the benchmark scenes; the mirror and glass interiors (issue 15).
+NAMES = list(scenes.BENCHMARK_SCENES) + ["veach_room", "mirror_glass_room"]
 #: Objects per file (meshes + camera).
-OBJECTS = {"s_corridor": 5, "cornell_box": 7, "door_ajar": 6, "baffled_lamp": 6, "directly_lit": 6}
+OBJECTS = {"s_corridor": 5, "cornell_box": 7, "door_ajar": 6, "baffled_lamp": 6, "directly_lit": 6,
+           "veach_room": 9, "mirror_glass_room": 13}
 
 #: Core (Y-up) coordinates of a Blender (Z-up) point: core (x, y, z) = Blender (x, z, −y).
 CORE_FROM_BLENDER = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
@@ -68,9 +70,11 @@ def test_blend_matches_builtin_scene(name):
     # Materials: same rows by name.
     for i, mat in enumerate(builtin.materials.names):
         j = desc.materials.names.index(mat)
-        for field in ("base_color", "roughness", "metallic", "specular", "emission"):
+        for field in ("base_color", "roughness", "metallic", "specular", "emission", "transmission"):
             assert np.allclose(getattr(desc.materials, field)[j], getattr(builtin.materials, field)[i],
                                rtol=1e-5, atol=1e-6), (mat, field)
+        if builtin.materials.transmission[i] > 0:       # glass: Glass BSDF's IOR
+            assert np.isclose(desc.materials.ior[j], builtin.materials.ior[i], rtol=1e-5), mat
     # Camera: same frame once rotated into the core's axes.
     c, b = desc.camera, builtin.camera
     m = c.world_from_camera.copy()
@@ -81,7 +85,8 @@ def test_blend_matches_builtin_scene(name):
     assert np.allclose(desc.world_radiance, 0)
 
 
-@pytest.mark.parametrize("name", ["s_corridor", "door_ajar", "baffled_lamp"])
+@pytest.mark.parametrize("name", ["s_corridor", "door_ajar", "baffled_lamp", "veach_room",
+                                  "mirror_glass_room"])
 def test_lamp_hidden_from_camera(name):
     """Indirect-lit scenes: no straight line joins the camera and any point of the lamp
     (a 9 × 9 barycentric grid on every lamp triangle); walls, door or baffle block it.

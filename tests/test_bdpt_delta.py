@@ -9,6 +9,9 @@ from the spread of K independent renders (standard errors of the image means).
 """
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -20,6 +23,9 @@ from ercuts_core.integrators.bdpt import BDPTIntegrator
 from ercuts_core.scene import BuiltScene
 from ercuts_core.scenes import cornell_box, icosphere, look_at
 from ercuts_core.validate import sanitize
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_bdpt import _render_with_strategies  # noqa: E402
 
 ETA = 1.5
 
@@ -253,20 +259,6 @@ def _mean_se(imgs: np.ndarray, region=np.s_[...]) -> tuple[float, float]:
     per = imgs[(slice(None),) + (region if isinstance(region, tuple) else (region,))]
     m = per.reshape(len(imgs), -1).mean(axis=1)
     return float(m.mean()), float(m.std(ddof=1) / np.sqrt(len(m)))
-
-
-def _render_with_strategies(desc: SceneDescription, settings: RenderSettings):
-    """Drive BDPT like ercuts_core.render does, keeping the per-(s, t) images."""
-    scene = BuiltScene(sanitize(desc).desc)
-    integ = BDPTIntegrator(scene, settings, debug_strategies=True)
-    film = Film(scene.camera.window)
-    n = film.window.n_pixels
-    for k in range(settings.samples):
-        part = Film(film.window)
-        integ.render_batch(part, np.arange(n), np.random.default_rng([settings.seed, k, 0]))
-        film.merge(part)
-    scene.close()
-    return film, integ.strategy_images
 
 
 def _means(imgs: np.ndarray) -> np.ndarray:

@@ -57,10 +57,20 @@ Passes (``RenderResult.aovs``), per pixel:
   diffuse-looking VPL: the gathered VPL light at *glossy* shading points (a specular lobe
   with roughness < :data:`GLOSSY_ROUGHNESS`, where the paper renders caustic paths by ERPT
   instead) plus the ERPT fallback deposits of VPLs that lit no sampled pixel. This
-  implementation deposits no separate caustic ERPT energy (the material model has no delta
-  lobes and every chain state deposits into its VPL), so er_caustic is a *part* of
+  implementation deposits no separate caustic ERPT energy (every chain state deposits into
+  its VPL; paths through delta lobes are path-traced, below), so er_caustic is a *part* of
   direct + indirect, not an addition to the image; 0 in scenes without glossy surfaces and
   fallback deposits.
+
+Mirrors and smooth glass (delta lobes, :mod:`ercuts_core.bsdf`). A VPL cannot light a delta
+lobe, nor stand for light leaving one, so the light is split by path: paths without a delta
+event take the five steps; every path with one (a mirror seen from the camera, a lamp behind
+glass, caustics) is path-traced with next-event estimation and MIS in the direct-light
+passes (``PathIntegrator(paths='direct_and_delta')``, or ``paths='delta'`` with
+``direct_light='VPL'``), and its energy there is taken out of P (``stats['P_delta']``). The
+chains reject delta events, BDPT seeds through a delta vertex are dropped, and delta lobes'
+lightcut bounds are 0. Scenes without delta materials (``BuiltScene.has_delta``) are
+rendered exactly as before.
 * 'cut_size' (h, w, 1) mean lightcut size, 'chain_deposits' (h, w, 1) chain states whose
   x1 lies in the pixel, and 'depth', 'normal', 'albedo' of the first shading point.
 """

@@ -61,6 +61,10 @@ SCENES = {
                              "normal maps) lit by an uplight aimed at the ceiling"),
     "textured_bedroom": ("indirect", "textured bedroom (tiles with a normal map, wallpaper, fabric) "
                          "lit by the sun and sky through a window"),
+    "veach_room": ("indirect", "Veach's test room: a lamp in a shade lights the ceiling; glass egg and "
+                   "chrome ball on a table"),
+    "mirror_glass_room": ("indirect", "wall mirror, glass partition and rough-glass ball in a room lit "
+                          "by a lamp aimed at a wall"),
 }
 #: Scenes without a core built-in: the engines render the .blend as the add-on exports it.
 BLEND_ONLY = ("textured_living_room", "textured_bedroom")

@@ -26,11 +26,11 @@ def test_quick_caps_the_core_command_line(monkeypatch, value, limit, expected):
 
 
 def test_quick_benchmarks_leave_the_stored_results_alone():
-    """``ERCUTS_QUICK=1 report.py`` plans one seed at 1 s (7 scenes × 5 engines) with runs and
+    """``ERCUTS_QUICK=1 report.py`` plans one seed at 1 s (9 scenes × 5 engines) with runs and
     report under out/quick/ (the dry run writes nothing)."""
     env = dict(os.environ, ERCUTS_QUICK="1")
     proc = subprocess.run([sys.executable, os.path.join(ROOT, "benchmarks", "report.py"), "--dry-run"],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert os.path.join("out", "quick", "benchmarks") in proc.stdout
-    assert re.search(r"report: 35 renders planned", proc.stdout), proc.stdout   # 7 scenes × 5 engines
+    assert re.search(r"report: 45 renders planned", proc.stdout), proc.stdout   # 9 scenes × 5 engines

@@ -39,7 +39,8 @@ REF_DIR = os.path.join(ROOT, "blend_scenes", "references")
 WORK = os.path.join(ROOT, "out", "references_work")
 #: Cycles samples per chunk (about a minute each on 2 cores).
 CHUNK_SPP = {"s_corridor": 2048, "cornell_box": 2048, "door_ajar": 1024, "baffled_lamp": 1024,
-             "directly_lit": 2048, "textured_living_room": 1024, "textured_bedroom": 1024}
+             "directly_lit": 2048, "textured_living_room": 1024, "textured_bedroom": 1024,
+             "veach_room": 1024, "mirror_glass_room": 1024}
 #: ``ERCUTS_QUICK=1`` (README): a smoke run — at most QUICK_ROUNDS chunks of QUICK_SPP samples
 #: per scene, written to ``out/quick/references/`` (never over the stored references).
 QUICK = quick()

@@ -289,6 +289,11 @@ class BDPTIntegrator(Integrator):
         self.env_pmf = float(lights.pmf(np.array([lights.env_light]))[0]) if self.has_env else 0.0
         self.inv_disk = 1.0 / (np.pi * lights.radius**2)             # infinite-light disk
         self.on_connections = on_connections
+        #: Σ luminance of the camera-side contributions (all but t = 1) of paths with a delta
+        #: event and two or more scattering vertices, over every batch rendered: ERCUTS's
+        #: estimate of how much of the rough image's indirect light is path-traced
+        #: (:meth:`~.ercuts.integrator.ErcutsIntegrator._render` sizes the direct phase by it)
+        self.delta_indirect = 0.0
 
     # ================================================================== driver
     def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator) -> None:
@@ -302,6 +307,8 @@ class BDPTIntegrator(Integrator):
         cam, alpha = self._camera_subpaths(film, pix, rng)
         lig, no_s0 = self._light_subpaths(n, rng)
         L = np.zeros((3, n, 3))                  # by path class (film.path_class of s + t − 2)
+        self._any_delta = (np.logical_or.accumulate(cam.delta, axis=0),
+                           np.logical_or.accumulate(lig.delta, axis=0))
         # Execute all connection strategies, one group of (s, t) pairs at a time
         with np.errstate(over="ignore", under="ignore"):
             for lane, s, t in self._rows_s0(cam).chunks(self.max_rows):
@@ -329,12 +336,23 @@ class BDPTIntegrator(Integrator):
             return
         if self.on_connections is not None:
             self._pending.append(Connection(lane, s, t, luminance(c), light_sample=light_sample))
+        self._count_delta(lane, s, t, c)
         cell = path_class(s + t - 2) * L.shape[1] + lane
         flat = L.reshape(-1, 3)
         for ch in range(3):
             flat[:, ch] += np.bincount(cell, weights=c[:, ch], minlength=len(flat))
         if self.strategy_images is not None:
             self._record_strategies(s, t, pix[lane], c)
+
+    def _count_delta(self, lane: NDArray, s: NDArray, t: NDArray, c: NDArray) -> None:
+        """Add to :attr:`delta_indirect` the rows whose path has a delta event: at a camera
+        vertex 1 … t − 2 or a light vertex 1 … s − 2 (the connection vertices are never delta),
+        with s + t − 2 ≥ 2 scattering vertices."""
+        cam_any, lig_any = self._any_delta
+        d = (np.where(t >= 2, cam_any[np.maximum(t - 2, 0), lane], False)
+             | np.where(s >= 2, lig_any[np.maximum(s - 2, 0), lane], False)) & (s + t - 2 >= 2)
+        if d.any():
+            self.delta_indirect += float(luminance(c[d]).sum())
 
     def _record_strategies(self, s: NDArray, t: NDArray, pix: NDArray, c: NDArray) -> None:
         """Debug: add rows to the per-(s, t) images (window pixel indices ``pix``)."""

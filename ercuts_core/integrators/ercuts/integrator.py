@@ -189,7 +189,9 @@ class ErcutsIntegrator:
         P_all = rough.energy()
         if not s.direct_vpls:     # light seen directly and scattered once: its own passes
             P = rough.indirect_energy()
-            self.schedule.grow_direct(1.0 - P / P_all if P_all > 0 else 0.0)
+            # the direct passes also path-trace the paths through mirrors and glass
+            P_vpl = max(P - rough.delta_indirect, 0.0)
+            self.schedule.grow_direct(1.0 - P_vpl / P_all if P_all > 0 else 0.0)
             with self._phase("direct"):
                 base, alpha = self._direct_light()
             P = self._without_delta(P, base[2:])
@@ -259,9 +261,12 @@ class ErcutsIntegrator:
         s, cam = self.settings, self.scene.camera
         k = rough_factor(cam.window.n_pixels, s.rough_samples)
         view = self.scene if k == 1 else scene_with_camera(self.scene, rough_camera(cam.desc, k))
-        film = self._passes(BDPTIntegrator(view, s), "BDPT", (), "bdpt", show=k == 1,
-                            samples=s.rough_samples)
-        return RoughImage(film, cam.window, (cam.width, cam.height), (view.camera.width, view.camera.height))
+        bdpt = BDPTIntegrator(view, s)
+        film = self._passes(bdpt, "BDPT", (), "bdpt", show=k == 1, samples=s.rough_samples)
+        rough = RoughImage(film, cam.window, (cam.width, cam.height), (view.camera.width, view.camera.height))
+        # (the camera-side estimate of the delta paths' indirect energy, full-window units)
+        rough.delta_indirect = bdpt.delta_indirect / max(film.passes_done, 1) * rough.pixel_area
+        return rough
 
     def _direct_light(self) -> tuple[NDArray, NDArray]:
         """``direct_samples`` jittered passes of the light that reaches the camera directly or after

@@ -207,6 +207,12 @@ def fresnel_dielectric(cos_i: F64, eta: F64) -> tuple[F64, F64]:
     return F, np.where(tir, 0.0, cos_t)
 
 
+def _refract(w: F64, n: F64, cos_w: F64, eta: F64, cos_t: F64) -> F64:
+    """(N, 3) refraction of unit w (N, 3) about unit n on w's side: −w/η + (cos_w/η − cos_t)·n
+    [pbrt-v4 eq. 9.4]; cos_w = w·n, η = η_t/η_i, cos_t from :func:`fresnel_dielectric`."""
+    return -w / eta[:, None] + (cos_w / eta - cos_t)[:, None] * n
+
+
 def sample_ggx_vndf(wo_local: F64, alpha: F64, u: F64) -> F64:
     """Sample a GGX microfacet normal from the distribution of visible normals.
 
@@ -450,7 +456,7 @@ class Bsdf:
         up = (cos_o > COS_EPS) & (dot(wo, ng) > COS_EPS) & lanes
         refl = up & (cos_i > COS_EPS) & (dot(wi, ng) > COS_EPS)
         trans = up & (cos_i < -COS_EPS) & (dot(wi, ng) < -COS_EPS)
-        eta_rel = np.where(dot(wo, self.ng) > 0.0, self.eta, 1.0 / self.eta)
+        eta_rel = self._eta_rel(wo)
         etap = np.where(trans, eta_rel, 1.0)
         wm = _normalize(wo + etap[:, None] * wi)
         wm = np.where((dot(wm, ns) < 0.0)[:, None], -wm, wm)
@@ -530,18 +536,23 @@ class Bsdf:
                 sample = self._sample_delta(sample, wo, flipped, u, adjoint)
         return sample
 
+    def _eta_rel(self, wo: F64) -> F64:
+        """(N,) relative index η_t/η_i of the glass lobe for wo: η when wo is on the side ``ng``
+        points to (entering), 1/η when it leaves."""
+        return np.where(dot(wo, self.ng) > 0.0, self.eta, 1.0 / self.eta)
+
     def _sample_rough_glass(self, wo: F64, wo_l: F64, m: F64, u0: F64, wi_l: F64) -> F64:
         """(N, 3) local directions: where u0 picked the rough glass lobe (u0 ≥ 1 − p_tr), the
         reflection (probability F, from the rescaled u0) or the refraction of wo about the
         visible GGX normal m [Walter et al. 2007 §5.3; pbrt-v4 DielectricBxDF::Sample_f];
         total internal reflection reflects. Other lanes keep ``wi_l``."""
         pick = (u0 >= 1.0 - self.p_tr) & ~self.delta
-        eta_rel = np.where(dot(wo, self.ng) > 0.0, self.eta, 1.0 / self.eta)
+        eta_rel = self._eta_rel(wo)
         d_o = dot(wo_l, m)
         F, cos_t = fresnel_dielectric(d_o, eta_rel)
         v = _div(u0 - (1.0 - self.p_tr), self.p_tr)
         refl = 2.0 * d_o[:, None] * m - wo_l
-        refr = -wo_l / eta_rel[:, None] + (d_o / eta_rel - cos_t)[:, None] * m
+        refr = _refract(wo_l, m, d_o, eta_rel, cos_t)
         reflect = v < F
         wi_g = np.where(reflect[:, None], refl, refr)
         # a reflection below the surface or a refraction above it is no sample (pbrt-v4):
@@ -568,13 +579,11 @@ class Bsdf:
         # Mirror: Schlick F at wo·n, chosen with probability p_spec
         F_m = schlick_fresnel(cos_o, self.f0[lanes], self.f90[lanes])
         w_m = F_m * _div(np.ones(len(lanes)), self.p_spec[lanes])[:, None]
-        # Glass: exact dielectric Fresnel; η_t/η_i = η entering (wo on ng's side), 1/η leaving
-        entering = dot(wo_l, self.ng[lanes]) > 0.0
-        eta_rel = np.where(entering, self.eta[lanes], 1.0 / self.eta[lanes])
+        # Glass: exact dielectric Fresnel
+        eta_rel = self._eta_rel(wo)[lanes]
         Fr, cos_t = fresnel_dielectric(cos_o, eta_rel)
         reflect = u[lanes, 1] < Fr
-        refr = (-wo_l / eta_rel[:, None]
-                + (cos_o / eta_rel - cos_t)[:, None] * n_l)
+        refr = _refract(wo_l, n_l, cos_o, eta_rel, cos_t)
         p_g = self.p_tr[lanes]
         w_r = np.repeat(_div(self.kr[lanes], p_g)[:, None], 3, axis=1)
         # Radiance (camera) transport through a refraction scales by 1/η_rel² [Veach 1997 §5.2]

@@ -716,7 +716,7 @@ class LightSet:
                 out[hit] = self.pt_I[j] * (spot / (np.pi * r * r))[:, None]
                 t_best[hit] = t[hit]
         for j in np.flatnonzero(self.sun_cone):
-            cos = dot(-d, np.broadcast_to(-self.sun_dir[j], d.shape))
+            cos = d @ self.sun_dir[j]                      # −d · (toward the sun = −sun_dir)
             hit = ~np.isfinite(t_best) & (1.0 - cos <= self.sun_omc[j])
             out[hit] += self.sun_L[j]
         return out

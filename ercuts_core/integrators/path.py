@@ -52,11 +52,11 @@ class PathIntegrator(Integrator):
         if paths != "all" and not scene.has_delta:
             self.max_depth = min(self.max_depth, 1)
 
-    def _counted(self, scatter: int, seen: NDArray) -> NDArray | bool:
-        """Which of a bounce's contributions with ``scatter`` scattering vertices are added:
-        (N,) bool from ``seen`` (the path has a delta vertex), or True for all."""
+    def _counted(self, scatter: int, seen: NDArray) -> NDArray:
+        """(N,) bool: which of a bounce's contributions with ``scatter`` scattering vertices
+        are added, from ``seen`` (N,) (the path has a delta vertex)."""
         if self.paths == "all":
-            return True
+            return np.ones(len(seen), bool)
         if self.paths == "delta":
             return seen
         return seen | (scatter <= 1)
@@ -91,7 +91,7 @@ class PathIntegrator(Integrator):
                     w = np.where(prev_delta[m], 1.0,
                                  power_heuristic(prev_pdf[m], lights.pdf_illuminate_env(d[m])))
                 visible_env = not (depth == 0 and s.film_transparent)
-                w = w * (counted if np.isscalar(counted) else counted[m])
+                w = w * counted[m]
                 if visible_env:
                     L[min(depth, 2), idx[m]] += beta[m] * Le * w[:, None]
             if hit.any() and len(lights.emissive_tris):
@@ -102,7 +102,7 @@ class PathIntegrator(Integrator):
                     if depth > 0:
                         pdf_l = lights.pdf_illuminate_tri(prev_p[em], surf.prim[em], surf.p[em], surf.ng[em])
                         w = np.where(prev_delta[em], 1.0, power_heuristic(prev_pdf[em], pdf_l))
-                    w = w * (counted if np.isscalar(counted) else counted[em])
+                    w = w * counted[em]
                     L[min(depth, 2), idx[em]] += beta[em] * Le[em] * w[:, None]
             # Keep only paths that hit something and may scatter again.
             if depth == self.max_depth:
@@ -119,9 +119,9 @@ class PathIntegrator(Integrator):
             if len(idx) == 0:
                 break
             nee = self._counted(depth + 1, seen)
-            if not lights.empty and np.any(nee):
+            if not lights.empty and nee.any():
                 L_nee = self._next_event(surf, wo, bsdf, rng)
-                L[min(depth + 1, 2), idx] += beta * L_nee * np.reshape(nee, (-1, 1))
+                L[min(depth + 1, 2), idx] += beta * L_nee * nee[:, None]
             # Sample the BSDF for the next bounce.
             bs = bsdf.sample(wo, rng.random((len(idx), 3)))
             beta = beta * bs.weight

@@ -109,7 +109,8 @@ def progress_batch_pixels(settings: RenderSettings) -> int:
 
 def run_passes(integrator: "Integrator", film: Film, clock: Clock, *, samples: int, batch: int,
                phase: str, key: tuple = (), fraction: Callable[[float], float] = lambda f: f,
-               deadline: float | None = None, show: bool = True) -> Film:
+               deadline: float | None = None, show: bool = True, first: int = 0,
+               on_pass: Callable[[Film], None] | None = None) -> Film:
     """The pass loop: up to ``samples`` passes of ``integrator`` over ``film``'s window.
 
     Each pass renders every pixel once, in batches of ``batch`` pixels with random streams
@@ -121,7 +122,10 @@ def run_passes(integrator: "Integrator", film: Film, clock: Clock, *, samples: i
     pass once ``deadline`` is past (the first pass always completes unless cancelled; a second
     is not forced: at 1080p one direct-light pass takes ≈ 40 s, and a forced second one left
     the later phases of a 120 s render no time).
-    ``show``: send the merged image to the preview after each pass. Returns ``film``.
+    ``show``: send the merged image to the preview after each pass. ``first``: index of the
+    first pass (its random streams; a later call continues a film's passes with new ones).
+    ``on_pass(part)``: called with every complete pass's own film before it is merged.
+    Returns ``film``.
     """
     s, window = integrator.settings, film.window
     n = window.n_pixels
@@ -129,7 +133,7 @@ def run_passes(integrator: "Integrator", film: Film, clock: Clock, *, samples: i
     for k in range(samples):
         part = Film(window)
         for start in range(0, n, batch):
-            rng = np.random.default_rng([s.seed, *key, k, start])
+            rng = np.random.default_rng([s.seed, *key, first + k, start])
             integrator.render_batch(part, np.arange(start, min(n, start + batch)), rng)
             f = (k + min(n, start + batch) / n) / samples
             if deadline is not None:    # with many samples, the time share says how far
@@ -137,6 +141,8 @@ def run_passes(integrator: "Integrator", film: Film, clock: Clock, *, samples: i
             if not clock.report(fraction(f), f"{phase} sample {k + 1}/{samples}"):
                 break
         if not clock.cancelled or film.passes_done == 0:
+            if on_pass is not None and not clock.cancelled:
+                on_pass(part)
             film.merge(part)
             if show:
                 clock.show(film.image)

@@ -133,6 +133,18 @@ def _column_views(obj, data: NDArray) -> None:
         setattr(obj, name, data[..., col])
 
 
+def _delta_counts(cam: "Subpaths", lig: "Subpaths") -> tuple[NDArray, NDArray, NDArray]:
+    """Per subpath vertex k (V, N): the delta events at camera vertices 0 … k, whether one of
+    them is *late* — not part of the camera-side prefix of purely delta surfaces (mirrors,
+    smooth glass) that ERCUTS's gather follows (:func:`~.ercuts.vpl.follow_specular`) — and
+    the delta events at light vertices 0 … k."""
+    pure = cam.delta & ~cam.connectible
+    pure[0] = True                                  # the camera vertex starts every prefix
+    late = cam.delta & ~np.logical_and.accumulate(pure, axis=0)
+    return (np.cumsum(cam.delta, axis=0), np.logical_or.accumulate(late, axis=0),
+            np.cumsum(lig.delta, axis=0))
+
+
 @dataclass
 class LightSample:
     """The light vertex of s = 1 connections: (R, 3) position (a direction for infinite
@@ -264,13 +276,23 @@ class BDPTIntegrator(Integrator):
         max_rows: connection rows evaluated together (bounds the memory of a group).
         on_connections: ``callback(cam, lig, rows)`` after every batch of lanes (module
             docstring, :class:`Connection`); None records nothing.
+        paths: 'all', or 'direct_and_late_delta': only the paths that ERCUTS's gather does
+            not render when it follows the camera through mirrors and smooth glass (as
+            :class:`~.path.PathIntegrator`'s set of that name; the class of a path, not of
+            a strategy, so the MIS weights stay those of all strategies).
     """
 
     def __init__(self, scene: BuiltScene, settings: RenderSettings, *,
                  debug_strategies: bool = False, mis_power: float = 2.0,
                  max_lanes: int = 1 << 15, max_rows: int = 1 << 17,
-                 on_connections: "Callable[[Subpaths, Subpaths, list[Connection]], None] | None" = None):
+                 on_connections: "Callable[[Subpaths, Subpaths, list[Connection]], None] | None" = None,
+                 paths: str = "all"):
         super().__init__(scene, settings)
+        if paths not in ("all", "direct_and_late_delta"):
+            raise ValueError(f"unknown path set {paths!r}")
+        self.traced_only = paths == "direct_and_late_delta"
+        if self.traced_only and on_connections is not None:
+            raise ValueError("on_connections records every path: paths must be 'all'")
         lights = scene.lights
         self.mis_power = float(mis_power)
         self.max_lanes = int(max_lanes)
@@ -289,11 +311,16 @@ class BDPTIntegrator(Integrator):
         self.env_pmf = float(lights.pmf(np.array([lights.env_light]))[0]) if self.has_env else 0.0
         self.inv_disk = 1.0 / (np.pi * lights.radius**2)             # infinite-light disk
         self.on_connections = on_connections
-        #: Σ luminance of the camera-side contributions (all but t = 1) of paths with a delta
-        #: event and two or more scattering vertices, over every batch rendered: ERCUTS's
-        #: estimate of how much of the rough image's indirect light is path-traced
-        #: (:meth:`~.ercuts.integrator.ErcutsIntegrator._render` sizes the direct phase by it)
+        #: Σ over every batch rendered of the image energy (Σ_pixels luminance, one pass's
+        #: units) of the paths with a delta event and two or more scattering vertices: the
+        #: part of the rough image's indirect light that ERCUTS's chains and VPLs do not carry
+        #: (:meth:`~.ercuts.integrator.ErcutsIntegrator._render` takes it out of P)
         self.delta_indirect = 0.0
+        #: … of those paths, the ones ERCUTS's direct-light passes path-trace when its gather
+        #: follows the camera through mirrors and windows (a late delta event, or at most one
+        #: other scattering vertex: ``PathIntegrator(paths='direct_and_late_delta')``); the
+        #: direct phase is sized by it
+        self.traced_indirect = 0.0
 
     # ================================================================== driver
     def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator) -> None:
@@ -307,8 +334,7 @@ class BDPTIntegrator(Integrator):
         cam, alpha = self._camera_subpaths(film, pix, rng)
         lig, no_s0 = self._light_subpaths(n, rng)
         L = np.zeros((3, n, 3))                  # by path class (film.path_class of s + t − 2)
-        self._any_delta = (np.logical_or.accumulate(cam.delta, axis=0),
-                           np.logical_or.accumulate(lig.delta, axis=0))
+        self._delta_counts = _delta_counts(cam, lig)
         # Execute all connection strategies, one group of (s, t) pairs at a time
         with np.errstate(over="ignore", under="ignore"):
             for lane, s, t in self._rows_s0(cam).chunks(self.max_rows):
@@ -322,7 +348,10 @@ class BDPTIntegrator(Integrator):
             if not self.camera.is_delta_direction:
                 for lane, s, t in self._rows_t1(lig).chunks(self.max_rows):
                     self._connect_camera(film, lig, no_s0, lane, s, t, rng)
-        L += cam.lights_seen
+        L += cam.lights_seen                                  # E S⁺ L: traced in every set
+        seen = float(luminance(cam.lights_seen[2]).sum())     # (two or more S: indirect)
+        self.delta_indirect += seen
+        self.traced_indirect += seen
         film.add_samples(pix, L.sum(axis=0), alpha, parts=L)
         if self.on_connections is not None:
             self.on_connections(cam, lig, self._pending)
@@ -331,12 +360,14 @@ class BDPTIntegrator(Integrator):
                     keep: NDArray, c: NDArray, light_sample: LightSample | None = None) -> None:
         """L[class, lane[keep]] += c, class = path_class(s + t − 2) (scattering vertices); rows
         of one lane may repeat across strategies."""
-        lane, s, t = lane[keep], s[keep], t[keep]
+        lane, s, t = lane[keep], s[keep], t[keep]           # c: the kept rows' contributions
+        traced = self._count_delta(lane, s, t, c)
+        if self.traced_only:
+            lane, s, t, c = lane[traced], s[traced], t[traced], c[traced]
         if len(lane) == 0:
             return
         if self.on_connections is not None:
             self._pending.append(Connection(lane, s, t, luminance(c), light_sample=light_sample))
-        self._count_delta(lane, s, t, c)
         cell = path_class(s + t - 2) * L.shape[1] + lane
         flat = L.reshape(-1, 3)
         for ch in range(3):
@@ -344,15 +375,30 @@ class BDPTIntegrator(Integrator):
         if self.strategy_images is not None:
             self._record_strategies(s, t, pix[lane], c)
 
-    def _count_delta(self, lane: NDArray, s: NDArray, t: NDArray, c: NDArray) -> None:
-        """Add to :attr:`delta_indirect` the rows whose path has a delta event: at a camera
-        vertex 1 … t − 2 or a light vertex 1 … s − 2 (the connection vertices are never delta),
-        with s + t − 2 ≥ 2 scattering vertices."""
-        cam_any, lig_any = self._any_delta
-        d = (np.where(t >= 2, cam_any[np.maximum(t - 2, 0), lane], False)
-             | np.where(s >= 2, lig_any[np.maximum(s - 2, 0), lane], False)) & (s + t - 2 >= 2)
+    def _count_delta(self, lane: NDArray, s: NDArray, t: NDArray, c: NDArray) -> NDArray:
+        """Classify connection rows (lane, s, t) by their path and count their energies Y(c)
+        (one pass's units): returns (R,) bool, the path is *traced* — it has a late delta
+        event (after another scattering vertex, or at a surface with a continuous lobe too:
+        :func:`_delta_counts`) or at most one scattering vertex that is not a camera-side
+        prefix delta event (what ERCUTS's direct passes render when its gather follows the
+        camera through mirrors and windows). Of the rows with s + t − 2 ≥ 2 scattering
+        vertices, those with a delta event — at a camera vertex 1 … t − 2 or a light vertex
+        1 … s − 2 (the connection vertices are never delta) — add to :attr:`delta_indirect`,
+        and the traced ones among them to :attr:`traced_indirect`."""
+        cam_n, cam_late, lig_n = self._delta_counts
+        tc, sc = np.maximum(t - 2, 0), np.maximum(s - 2, 0)
+        n_cam = np.where(t >= 2, cam_n[tc, lane], 0)
+        n_lig = np.where(s >= 2, lig_n[sc, lane], 0)
+        scatter = s + t - 2
+        late = np.where(t >= 2, cam_late[tc, lane], False) | (n_lig > 0)
+        prefix = np.where(late, 0, n_cam)          # without a late event every camera delta is prefix
+        traced = late | (scatter - prefix <= 1)
+        d = (n_cam + n_lig > 0) & (scatter >= 2)
         if d.any():
-            self.delta_indirect += float(luminance(c[d]).sum())
+            y = luminance(c[d])
+            self.delta_indirect += float(y.sum())
+            self.traced_indirect += float(y[traced[d]].sum())
+        return traced
 
     def _record_strategies(self, s: NDArray, t: NDArray, pix: NDArray, c: NDArray) -> None:
         """Debug: add rows to the per-(s, t) images (window pixel indices ``pix``)."""
@@ -846,10 +892,14 @@ class BDPTIntegrator(Integrator):
                              qs_fwd=lig.at("pdf_fwd", k, lane), no_s0=no_s0[lane])
         vis = self.scene.tracer.visible(p, ng, np.ascontiguousarray(eye), None)
         raster, c, s, t = raster[vis], (c * w[:, None])[vis], s[vis], t[vis]
+        lane, eye = lane[vis], eye[vis]
+        traced = self._count_delta(lane, s, t, c / self.window.n_pixels)
+        if self.traced_only:
+            lane, raster, c, s, t = lane[traced], raster[traced], c[traced], s[traced], t[traced]
         film.add_splats(raster, c, path_class(s + t - 2))
         if self.on_connections is not None:
-            self._pending.append(Connection(lane[vis], s, t, luminance(c) / self.window.n_pixels,
-                                            raster=raster, eye=eye[vis]))
+            self._pending.append(Connection(lane, s, t, luminance(c) / self.window.n_pixels,
+                                            raster=raster, eye=eye))
         if self.strategy_images is not None and len(c):
             win = self.window
             pix, ok = win.pixel(raster)

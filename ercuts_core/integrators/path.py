@@ -29,7 +29,7 @@ from .base import Integrator
 
 
 #: Which paths :class:`PathIntegrator` adds to the film (see its docstring).
-PATH_SETS = ("all", "direct_and_delta", "delta")
+PATH_SETS = ("all", "direct_and_delta", "delta", "direct_and_late_delta")
 
 
 class PathIntegrator(Integrator):
@@ -39,8 +39,15 @@ class PathIntegrator(Integrator):
     traced, so that later vertices are found): 'all'; 'delta', the paths with at least one
     delta vertex (a mirror or smooth glass event: what ERCUTS's VPLs cannot carry); and
     'direct_and_delta', those plus the paths with at most one scattering vertex (light seen
-    directly and scattered once: ERCUTS's direct-light passes). Without delta materials in the
-    scene (``BuiltScene.has_delta``) the last two stop after the first bounce.
+    directly and scattered once: ERCUTS's direct-light passes). 'direct_and_late_delta' is
+    the complement of what ERCUTS's gather renders when it follows the camera through
+    mirrors and smooth glass (:func:`~.ercuts.vpl.follow_specular`): paths with at most one
+    scattering vertex that is not a delta event of a purely delta surface met before any
+    other vertex (light seen directly, in a mirror or through a window, and direct light at
+    the first other surface), and paths with a *late* delta event (after another vertex, or
+    at a surface that also has a continuous lobe: caustics, a lamp behind glass). Without
+    delta materials in the scene (``BuiltScene.has_delta``) the last three stop after the
+    first bounce.
     """
 
     def __init__(self, scene, settings, paths: str = "all"):
@@ -52,13 +59,17 @@ class PathIntegrator(Integrator):
         if paths != "all" and not scene.has_delta:
             self.max_depth = min(self.max_depth, 1)
 
-    def _counted(self, scatter: int, seen: NDArray) -> NDArray:
+    def _counted(self, scatter: int, seen: NDArray, late: NDArray, nd: NDArray) -> NDArray:
         """(N,) bool: which of a bounce's contributions with ``scatter`` scattering vertices
-        are added, from ``seen`` (N,) (the path has a delta vertex)."""
+        are added, from ``seen`` (N,) (the path has a delta vertex), ``late`` (N,) (it has
+        a late one, see the class docstring) and ``nd`` (N,) (its scattering vertices that
+        are not prefix delta events)."""
         if self.paths == "all":
             return np.ones(len(seen), bool)
         if self.paths == "delta":
             return seen
+        if self.paths == "direct_and_late_delta":
+            return late | (nd <= 1)
         return seen | (scatter <= 1)
 
     def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator) -> None:
@@ -72,10 +83,12 @@ class PathIntegrator(Integrator):
         prev_pdf = np.zeros(n)             # BSDF pdf of the ray that led here (0: camera ray)
         prev_delta = np.zeros(n, bool)     # that ray came from a delta lobe (no MIS: weight 1)
         seen = np.zeros(n, bool)           # the path so far has a delta vertex
+        late = np.zeros(n, bool)           # … one after another vertex or on a mixed surface
+        nd = np.zeros(n, np.int64)         # vertices so far that were not prefix delta events
         prev_p = np.zeros((n, 3))
         alpha = None
         for depth in range(self.max_depth + 1):
-            counted = self._counted(depth, seen)
+            counted = self._counted(depth, seen, late, nd)
             surf = scene.intersect(o, d)
             if depth == 0:
                 alpha = self.alpha(surf)
@@ -111,14 +124,15 @@ class PathIntegrator(Integrator):
                     self.record_first_hit(film, pix, keep, surf.subset(keep), None)
                 break
             keep = np.flatnonzero(hit)
-            surf, d, beta, idx, seen = surf.subset(keep), d[keep], beta[keep], idx[keep], seen[keep]
+            surf, d, beta, idx = surf.subset(keep), d[keep], beta[keep], idx[keep]
+            seen, late, nd = seen[keep], late[keep], nd[keep]
             wo = -d
             bsdf = scene.bsdf(surf.mat, surf.ns, surf.ng, surf.p)
             if depth == 0:
                 self.record_first_hit(film, pix, keep, surf, bsdf)
             if len(idx) == 0:
                 break
-            nee = self._counted(depth + 1, seen)
+            nee = self._counted(depth + 1, seen, late, nd + 1)
             if not lights.empty and nee.any():
                 L_nee = self._next_event(surf, wo, bsdf, rng)
                 L[min(depth + 1, 2), idx] += beta * L_nee * nee[:, None]
@@ -135,6 +149,9 @@ class PathIntegrator(Integrator):
             if len(keep) == 0:
                 break
             surf, beta, idx = surf.subset(keep), beta[keep], idx[keep]
+            prefix = bs.is_delta & bsdf.is_delta & (nd == 0)      # a camera-side mirror/window
+            late = (late | (bs.is_delta & ~prefix))[keep]
+            nd = (nd + ~prefix)[keep]
             seen = seen[keep] | bs.is_delta[keep]
             d = bs.wi[keep]
             prev_pdf, prev_p, prev_delta = bs.pdf[keep], surf.p, bs.is_delta[keep]

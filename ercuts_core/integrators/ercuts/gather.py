@@ -15,9 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ...sampling import luminance
 from ...scene import BuiltScene
 from ...settings import RenderSettings
 from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
+from .balance import DirectRival, PassVariance
 from .pacing import MAX_PACED_ERROR, GatherPace, Schedule
 from .stochastic_lightcuts import leaf_cdf, stochastic_lightcut
 from .vpl import GBuffer
@@ -38,6 +40,9 @@ PASS_SALT = 0x5C7
 #: Another stochastic gather pass starts only if the iteration's time left is at least this
 #: share of the first pass's duration (a pass the time cuts short keeps the points it reached).
 PASS_START = 0.1
+#: A direct-light pass takes spare time only if the iteration's time left holds this many of
+#: its durations (it is not cut short: a pass of the direct film must be complete).
+RIVAL_START = 1.5
 #: Consecutive shading points kept together in the shuffled gather order (coherent rays).
 GATHER_RUN = 32
 #: Cut sharing (``stochastic_cut_sharing``): a point shares its block's cut when its shading
@@ -57,12 +62,15 @@ class Gathered:
     """The VPL gather per pixel: ``parts`` (2, h·w, 3) light of emitter VPLs (direct) and of
     the others (indirect), before the energy scale; ``glossy`` (h·w, 3) the part gathered at
     glossy shading points; ``cut`` (h·w, 1) mean cut size; ``complete`` (h·w,) every shading
-    point of the pixel was gathered."""
+    point of the pixel was gathered; ``through_energy`` Σ_pixels Y of the part gathered at
+    points reached through mirrors and smooth glass (:func:`.vpl.follow_specular`: light
+    that P, the energy of delta-free paths, does not count)."""
 
     parts: NDArray
     glossy: NDArray
     cut: NDArray
     complete: NDArray
+    through_energy: float = 0.0
 
 
 def per_pixel(values: NDArray, n_pixels: int, S: int) -> NDArray:
@@ -93,9 +101,11 @@ class Gather:
         self.scene, self.settings, self.g = scene, settings, g
         self.gather_batch = gather_batch
 
-    def run(self, vpls, tree, gmax: float, schedule: Schedule, stats: dict, show) -> Gathered:
+    def run(self, vpls, tree, gmax: float, schedule: Schedule, stats: dict, show,
+            rival: DirectRival | None = None) -> Gathered:
         """VPL light at every shading point; ``show(point_parts, complete)`` after every batch
-        (preview).
+        (preview). ``rival``: the direct-light passes, which may take spare time instead of
+        further gather passes (:mod:`.balance`).
 
         Cancelling (or running out of time) stops after the current batch; a cancel during a
         lightcut batch stops its refinement, so the batch keeps coarser but complete cuts.
@@ -121,36 +131,54 @@ class Gather:
             done_pt[:] = True       # no VPL light anywhere: every point is complete (with 0)
         passes = 1.0
         if s.gather == "STOCHASTIC" and done == len(pts_all) and len(pts_all):
-            L, passes = self._more_passes(sweep, L, time.perf_counter() - t0, schedule, show, done_pt)
+            L, passes = self._more_passes(sweep, L, time.perf_counter() - t0, schedule, show, done_pt, rival)
         stats["gather_passes"] = passes
         sweep.record(stats, done, cut)
         glossy = self._glossy(done_pt & g.valid)
+        through = 0.0
+        if g.through is not None:
+            through = float(luminance(L[:, g.through].sum(axis=(0, 1)))) / S
         return Gathered(parts=per_pixel_parts(L, S),
                         glossy=per_pixel(L.sum(axis=0) * glossy[:, None], window.n_pixels, S),
                         cut=per_pixel(cut[:, None], window.n_pixels, S),
-                        complete=done_pt.reshape(-1, S).all(axis=1))
+                        complete=done_pt.reshape(-1, S).all(axis=1), through_energy=through)
 
     def _more_passes(self, sweep: "_Sweep", L: NDArray, t_pass: float, schedule: Schedule, show,
-                     done_pt: NDArray) -> tuple[NDArray, float]:
+                     done_pt: NDArray, rival: DirectRival | None = None) -> tuple[NDArray, float]:
         """Passes 2 … ``stochastic_passes`` of the stochastic gather (more while the time left
         holds them when the iteration fills its time, asked again after every pass: once the
-        passes are done, time that no later iteration would use goes into more passes), each
-        point's estimate the mean of its passes. A pass the iteration's time cuts short keeps the points it reached (spread over
+        passes are done, time that no later iteration would use goes into more passes — or,
+        pass by pass, into more direct-light passes of ``rival`` when that lowers the image's
+        error more per second, :mod:`.balance`), each point's estimate the mean of its passes.
+        A pass the iteration's time cuts short keeps the points it reached (spread over
         the image by :func:`spread_order`): each pass is an unbiased estimate per point, so a
         mean over 1 or 2 passes is too. Returns the mean (2, Q, 3) and the passes made
         (fractional for a cut-short last one)."""
-        s, n_pts = self.settings, len(sweep.pts_all)
+        s, n_pts, S = self.settings, len(sweep.pts_all), self.g.samples
+        n_pixels = self.scene.camera.window.n_pixels
         total, count, passes = L.copy(), np.ones(len(self.g.pixel)), 1.0
+        spread = PassVariance(n_pixels)
+        spread.add(_pixel_luminance(L, n_pixels, S))
         while (passes < s.stochastic_passes or schedule.fills_time()) and not schedule.clock.cancelled \
                 and schedule.remaining() > PASS_START * t_pass:
+            if rival is not None and passes >= s.stochastic_passes \
+                    and schedule.remaining() > RIVAL_START * rival.seconds:
+                ref = spread.mean() + rival.variance.mean()
+                if rival.gain(ref) > spread.gain(ref, t_pass):
+                    if not rival.step():
+                        break
+                    continue
+            t0 = time.perf_counter()
             L2, _, _, done2 = sweep.run(int(passes), lambda parts, c: None)
             pts = sweep.pts_all[:done2]
             total[:, pts] += L2[:, pts]
             count[pts] += 1
             passes += done2 / n_pts
-            show(total / count[None, :, None], done_pt.reshape(-1, self.g.samples).all(axis=1))
+            show(total / count[None, :, None], done_pt.reshape(-1, S).all(axis=1))
             if done2 < n_pts:
                 break
+            spread.add(_pixel_luminance(L2, n_pixels, S))
+            t_pass = 0.5 * (t_pass + time.perf_counter() - t0)
         return total / count[None, :, None], passes
 
     def _glossy(self, gathered: NDArray) -> NDArray:
@@ -243,6 +271,8 @@ class _Sweep:
             if not self._batch(idx, start, pass_index, L, cut):
                 stopped = True                  # brute force: the batch was abandoned
                 break
+            if g.weight is not None:            # points seen in mirrors, through glass
+                L[:, idx] *= g.weight[idx]
             done = start + len(idx)
             done_pt[idx] = True
             if pass_index == 0:
@@ -346,6 +376,11 @@ def emitter_share(tree, vpls) -> NDArray:
     cs = np.vstack([np.zeros((1, 3)), np.cumsum(em[tree.leaf_order], axis=0)])
     sub = cs[tree.leaf_start + tree.leaf_count] - cs[tree.leaf_start]
     return np.divide(sub, tree.intensity, out=np.zeros_like(sub), where=tree.intensity > 0)
+
+
+def _pixel_luminance(L: NDArray, n_pixels: int, S: int) -> NDArray:
+    """(n_pixels,) luminance of a gather pass's (2, Q, 3) light, averaged per pixel."""
+    return per_pixel(luminance(L.sum(axis=0))[:, None], n_pixels, S)[:, 0]
 
 
 def _sum_rows(group: NDArray, values: NDArray, n: int) -> NDArray:

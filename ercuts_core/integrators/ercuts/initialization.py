@@ -75,9 +75,11 @@ class RoughImage:
         self.film, self.full = film, full
         (W, H), (w, h) = full_size, low_size
         self.pixel_area = (W / w) * (H / h)        # full pixels per low-resolution pixel
-        #: indirect energy of the paths through delta lobes (set by the integrator from
-        #: :attr:`BDPTIntegrator.delta_indirect`; camera-side strategies only)
+        #: indirect energy of the paths through delta lobes, and of those among them that the
+        #: direct-light passes path-trace (set by the integrator from
+        #: :attr:`BDPTIntegrator.delta_indirect` and ``traced_indirect``)
         self.delta_indirect = 0.0
+        self.traced_indirect = 0.0
         self.same = film.window == full
         self._full: tuple[int, Film] | None = None     # (passes_done, full_film()) cache
         if not self.same:

@@ -92,6 +92,7 @@ from ...vecmath import dot
 from ..base import Clock, batch_pixels, progress_batch_pixels, run_passes
 from ..bdpt import BDPTIntegrator
 from ..path import PathIntegrator
+from .balance import DirectRival, PassVariance
 from .er_sampling import chain_starts, run_chains
 from .gather import Gather, Gathered, per_pixel, per_pixel_parts
 from .initialization import RoughImage, rough_camera, rough_factor, scene_with_camera, seeds_from_path_tracer
@@ -103,8 +104,12 @@ from .progressive import (iteration_end, iteration_settings, iteration_target, m
 from .paths import PathBatch
 from .seeding import seed_paths
 from . import warm_up
-from .vpl import GBuffer, build_gbuffer, g_clamp, make_vpls
+from .vpl import SPECULAR_BOUNCES, GBuffer, build_gbuffer, follow_specular, g_clamp, make_vpls
 
+#: The gather shades what perfect mirrors show and smooth glass lets through with the VPLs
+#: (algorithm.md §G.3, :func:`~.vpl.follow_specular`); False = the ablation: every path with
+#: a delta event is path-traced in the direct-light passes (before issue 15's follow-up).
+FOLLOW_SPECULAR = True
 #: Conservative throughput of the E1 estimate (light-traced samples per second, 2 cores).
 _E1_RATE = 1.0e6
 #: Largest E1 chunk (samples) for progress reports every ~0.25 s of work.
@@ -171,6 +176,7 @@ class ErcutsIntegrator:
         time runs out). Returns False when stopped early."""
         self.clock, self.timings, self.stats = clock, timings, stats
         self.rough: RoughImage | None = None
+        self.direct_rival: DirectRival | None = None      # set by the direct-light phase
         try:
             self._render(film)
         except _Stopped:
@@ -187,18 +193,27 @@ class ErcutsIntegrator:
         stats["rough_resolution"] = rough.film.window.width
         self.clock.show(lambda: rough.full_film().image())    # built only if a preview is due
         P_all = rough.energy()
+        follow = self._follows_specular()
         if not s.direct_vpls:     # light seen directly and scattered once: its own passes
             P = rough.indirect_energy()
-            # the direct passes also path-trace the paths through mirrors and glass
-            P_vpl = max(P - rough.delta_indirect, 0.0)
+            # the direct passes also path-trace the paths through mirrors and glass (with
+            # ``follow``, those the gather does not take over: late delta events)
+            P_vpl = max(P - (rough.traced_indirect if follow else rough.delta_indirect), 0.0)
             self.schedule.grow_direct(1.0 - P_vpl / P_all if P_all > 0 else 0.0)
             with self._phase("direct"):
-                base, alpha = self._direct_light()
-            P = self._without_delta(P, base[2:])
+                base, alpha = self._direct_light("direct_and_late_delta" if follow else "direct_and_delta")
+            if follow:      # the direct passes no longer see every delta path: BDPT's estimate
+                self.stats["P_delta"], self.stats["P_traced"] = rough.delta_indirect, rough.traced_indirect
+                P = max(P - rough.delta_indirect, 0.0)
+            else:
+                P = self._without_delta(P, base[2:])
         with self._phase("seeds"):
             window = self.scene.camera.window
             jitter = stratified_jitter(window.n_pixels, s.shading_samples, self.base_seed, self.iteration)
             g, _ = build_gbuffer(self.scene, s.shading_samples, rng, jitter, poll=self._gbuffer_poll)
+            # the gather's points: what mirrors show and windows let through (§G.3)
+            g_gather = (follow_specular(self.scene, g, rng, min(SPECULAR_BOUNCES, s.max_depth - 2))
+                        if follow else g)
             if s.direct_vpls:
                 base, alpha = self._direct_image(g, rng), self._alpha(g)
                 P = max(P_all - float(luminance(base.sum(axis=0)).sum()), 0.0)
@@ -221,8 +236,13 @@ class ErcutsIntegrator:
         with self._phase("tree"):                 # 4. light tree
             tree = self._light_tree(vpls)
         with self._phase("cuts", check=False):    # 5. lightcuts (or the brute-force ablation)
-            gathered = self._gather(g, vpls, tree, gmax, base, alpha)
-        scale = self._energy_scale(gathered.parts.sum(axis=0), vpls, P)
+            gathered = self._gather(g_gather, vpls, tree, gmax, base, alpha)
+        if self.direct_rival is not None and self.direct_rival.extra:   # spare time went there too
+            direct = self.direct_film
+            base, alpha = direct.light_parts(), direct.alpha / max(direct.passes_done, 1)
+            stats["direct_samples"] = direct.passes_done
+            stats["direct_samples_for_spare_time"] = self.direct_rival.extra
+        scale = self._energy_scale(gathered, vpls, P)
         light = self._compose(base, gathered.parts, vpls, scale)
         if not gathered.complete.all():     # cancelled: the rough image where not gathered
             missing = np.flatnonzero(~gathered.complete)
@@ -265,23 +285,52 @@ class ErcutsIntegrator:
         film = self._passes(bdpt, "BDPT", (), "bdpt", show=k == 1, samples=s.rough_samples)
         rough = RoughImage(film, cam.window, (cam.width, cam.height), (view.camera.width, view.camera.height))
         # (the camera-side estimate of the delta paths' indirect energy, full-window units)
-        rough.delta_indirect = bdpt.delta_indirect / max(film.passes_done, 1) * rough.pixel_area
+        per_pass = rough.pixel_area / max(film.passes_done, 1)
+        rough.delta_indirect = bdpt.delta_indirect * per_pass
+        rough.traced_indirect = bdpt.traced_indirect * per_pass
         return rough
 
-    def _direct_light(self) -> tuple[NDArray, NDArray]:
+    def _direct_light(self, paths: str) -> tuple[NDArray, NDArray]:
         """``direct_samples`` jittered passes of the light that reaches the camera directly or after
         one scattering (path tracing: next-event estimation from every light with MIS against
-        BSDF sampling, emitters and world seen directly) and of every path through a mirror or
-        smooth glass (``PathIntegrator(paths='direct_and_delta')``: the VPLs cannot carry
-        light across a delta vertex), fewer if the phase's time share runs out; the rough
-        image stays on screen meanwhile.
+        BSDF sampling, emitters and world seen directly) and of the paths through a mirror or
+        smooth glass that the VPLs cannot carry (``PathIntegrator(paths=paths)``:
+        'direct_and_delta', every one; 'direct_and_late_delta', those the gather does not
+        take over when it follows the camera through mirrors and windows), fewer if the
+        phase's time share runs out; the rough image stays on screen meanwhile.
 
         Returns the passes' (3, h·w, 3) light passes and (h·w,) coverage; the film goes."""
-        path = PathIntegrator(self.scene, self.settings, paths="direct_and_delta")
+        path = PathIntegrator(self.scene, self.settings, paths=paths)
+        n = self.scene.camera.window.n_pixels
+        variance = PassVariance(n)
+
+        def on_pass(part: Film) -> None:
+            variance.add(luminance(part.light_parts().sum(axis=0)))
+
+        t0 = time.perf_counter()
         direct = self._passes(path, "Direct light", (0xD1,), "direct", show=False,
-                              samples=self.settings.direct_samples)
+                              samples=self.settings.direct_samples, on_pass=on_pass)
         self.stats["direct_samples"] = direct.passes_done
+
+        def one_more() -> bool:
+            # started only with time for it (gather.py): the time limit is not checked inside,
+            # a cancel is (through the render clock's progress callback)
+            before, clock = direct.passes_done, Clock(0.0, self.clock.poll)
+            run_passes(path, direct, clock, samples=1, batch=batch_pixels(self.memory, self.settings),
+                       phase="Lightcuts", key=(0xD1,), first=before, show=False, on_pass=on_pass,
+                       fraction=lambda f: self.schedule.fraction("Lightcuts", 1.0))
+            return variance.count == direct.passes_done > before
+
+        self.direct_film = direct
+        self.direct_rival = DirectRival(one_more, variance,
+                                        (time.perf_counter() - t0) / max(direct.passes_done, 1))
         return direct.light_parts(), direct.alpha / max(direct.passes_done, 1)
+
+    def _follows_specular(self) -> bool:
+        """The gather follows the camera through perfect mirrors and smooth glass
+        (:func:`~.vpl.follow_specular`): with ``direct_light='NEE'`` in scenes with delta
+        materials, unless :data:`FOLLOW_SPECULAR` (the ablation) is off."""
+        return FOLLOW_SPECULAR and not self.settings.direct_vpls and self.scene.has_delta
 
     def _delta_paths(self) -> NDArray:
         """(3, h·w, 3) light passes of the paths through a mirror or smooth glass
@@ -301,13 +350,14 @@ class ErcutsIntegrator:
         self.stats["P_delta"] = e
         return max(P - e, 0.0)
 
-    def _passes(self, integrator, phase: str, key: tuple, share: str, show: bool, samples: int) -> Film:
+    def _passes(self, integrator, phase: str, key: tuple, share: str, show: bool, samples: int,
+                on_pass=None) -> Film:
         """:func:`~ercuts_core.integrators.base.run_passes` within ``share``'s deadline."""
         s = self.settings
         return run_passes(integrator, Film(integrator.window), self.clock, samples=samples,
                           batch=batch_pixels(self.memory, s), phase=phase,
                           key=key, fraction=lambda f: self.schedule.fraction(phase, f),
-                          deadline=self.schedule.deadline(share), show=show)
+                          deadline=self.schedule.deadline(share), show=show, on_pass=on_pass)
 
     def _seeds(self, rng, pix=None):
         s, scene = self.settings, self.scene
@@ -414,7 +464,7 @@ class ErcutsIntegrator:
             self.clock.show(image)
 
         gather = Gather(self.scene, self.settings, g, self.memory.gather_batch)
-        return gather.run(vpls, tree, gmax, self.schedule, self.stats, show)
+        return gather.run(vpls, tree, gmax, self.schedule, self.stats, show, rival=self.direct_rival)
 
     # ------------------------------------------------------------------ non-VPL light
     def _direct_image(self, g: GBuffer, rng, n_light_samples: int = 4) -> NDArray:
@@ -447,9 +497,10 @@ class ErcutsIntegrator:
             L[1, h] = acc / n_light_samples
         return per_pixel_parts(L, S)
 
-    def _energy_scale(self, gather: NDArray, vpls, P: float) -> float:
+    def _energy_scale(self, gathered: Gathered, vpls, P: float) -> float:
         """1, or with the ``normalize_to_p`` ablation the factor that makes the VPL image's
-        energy P (paper §3.3: every path carries P/n).
+        energy P (paper §3.3: every path carries P/n); the light gathered at points seen in
+        mirrors or through windows is not part of either.
 
         Each VPL is normalised by its own estimate Ê1 (vpl.py, two-stage: its Jensen bias
         is small); the ratio E(VPL image) / P is reported as ``vpl_energy_ratio`` (1 =
@@ -457,7 +508,7 @@ class ErcutsIntegrator:
         error of the normalisation (issue 13); an incomplete gather is never rescaled.
         """
         stats = self.stats
-        energy = float(luminance(gather + vpls.fallback).sum())
+        energy = float(luminance(gathered.parts.sum(axis=0) + vpls.fallback).sum()) - gathered.through_energy
         stats["vpl_energy_ratio"] = energy / P if P > 0 else 0.0
         if not self.settings.normalize_to_p or energy <= 0 or P <= 0 or stats.get("gather_incomplete"):
             return 1.0

@@ -45,6 +45,9 @@ class GBuffer:
         mat: (Q,) material row; valid: (Q,) the ray hit a surface.
         surf: the raw :class:`Surface` (unflipped normals, for emission lookups).
         samples: shading points per pixel (S).
+        weight: (Q, 3) throughput of the perfect mirrors and smooth glass between the camera
+            and the point (:func:`follow_specular`), None for first hits (weight 1).
+        through: (Q,) bool, the point was reached through such surfaces (None: none was).
     """
 
     pixel: NDArray
@@ -56,6 +59,8 @@ class GBuffer:
     valid: NDArray
     surf: Surface
     samples: int
+    weight: NDArray | None = None
+    through: NDArray | None = None
 
 
 #: Camera rays per G-buffer chunk (≈ 0.35 s of tracing and shading on 2 cores).
@@ -94,6 +99,65 @@ def build_gbuffer(scene: BuiltScene, samples: int, rng: np.random.Generator,
     flip = dot(surf.ng, wo) < 0
     sign = np.where(flip, -1.0, 1.0)[:, None]
     return GBuffer(pix, surf.p, surf.ng * sign, surf.ns * sign, wo, surf.mat, surf.valid, surf, samples), d
+
+
+#: Perfect mirrors and smooth glass followed from the camera at most (:func:`follow_specular`);
+#: a point still on one after as many is dropped (its light is lost: a hall of mirrors).
+SPECULAR_BOUNCES = 16
+
+
+def follow_specular(scene: BuiltScene, g: GBuffer, rng: np.random.Generator,
+                    max_bounces: int = SPECULAR_BOUNCES) -> GBuffer:
+    """``g`` with its points on purely delta surfaces (perfect mirrors, smooth glass:
+    :attr:`~ercuts_core.bsdf.Bsdf.is_delta`) moved along the camera path to the first
+    surface that is not one (algorithm.md §G.3; Keller's and pbrt-v2's IGI follow
+    SpecularReflect/Transmit the same way), so that the gather shades what a mirror shows or
+    a window lets through with the VPLs instead of leaving it to a path tracer.
+
+    At every delta point the lobe is sampled once (glass: reflection or refraction with the
+    Fresnel probability) and ``weight`` (Q, 3) multiplies the sample weights (the mirror's
+    F, the glass tint and 1/η² of radiance transport; the estimate of the pixel stays
+    unbiased, Veach 1997 §5.2). Points whose path leaves the scene, is absorbed or is still on
+    a delta surface after ``max_bounces`` become invalid: what they see — emitters, the world,
+    lights in the mirror — and the direct light at the point reached are the direct-light
+    passes' (``PathIntegrator(paths='direct_and_late_delta')``). Materials with a delta and a
+    continuous lobe (a smooth coat on a diffuse base) are not followed: their delta event
+    stays a path-traced path. ``g`` itself is unchanged (its first hits serve E1, the AOVs
+    and the alpha); ``through`` marks the moved points."""
+    if not scene.has_delta:
+        return g
+    surf = Surface(*(np.array(a, copy=True) for a in g.surf.arrays()))
+    wo = np.array(g.wo, copy=True)
+    weight = np.ones((len(g.pixel), 3))
+    through = np.zeros(len(g.pixel), bool)
+    lanes = np.flatnonzero(surf.valid)
+    for bounce in range(max_bounces + 1):
+        if len(lanes) == 0:
+            break
+        bsdf = scene.bsdf(surf.mat[lanes], surf.ns[lanes], surf.ng[lanes], surf.p[lanes])
+        delta = bsdf.is_delta
+        lanes, bsdf = lanes[delta], bsdf.subset(delta)
+        if len(lanes) == 0 or bounce == max_bounces:
+            surf.valid[lanes] = False
+            break
+        bs = bsdf.sample(wo[lanes], rng.random((len(lanes), 3)))
+        weight[lanes] *= bs.weight
+        through[lanes] = True
+        ok = bs.valid & (weight[lanes].max(axis=1) > 0)
+        surf.valid[lanes[~ok]] = False
+        lanes, wi = lanes[ok], bs.wi[ok]
+        nxt = scene.intersect(scene.tracer.offset(surf.p[lanes], surf.ng[lanes], wi), wi)
+        surf.valid[lanes[~nxt.valid]] = False
+        hit = np.flatnonzero(nxt.valid)
+        lanes, nxt = lanes[hit], nxt.subset(hit)
+        for name, column in zip(("p", "ng", "ns", "prim", "mat"), (nxt.p, nxt.ng, nxt.ns, nxt.prim, nxt.mat)):
+            getattr(surf, name)[lanes] = column
+        surf.t[lanes] += nxt.t
+        wo[lanes] = -wi[hit]
+    weight[~surf.valid] = 0.0
+    sign = np.where(dot(surf.ng, wo) < 0, -1.0, 1.0)[:, None]
+    return GBuffer(g.pixel, surf.p, surf.ng * sign, surf.ns * sign, wo, surf.mat, surf.valid, surf,
+                   g.samples, weight, through)
 
 
 def g_clamp(scene: BuiltScene, clamp: float) -> float:

@@ -1,0 +1,95 @@
+"""Where an iteration's spare time goes: another direct-light pass or another stochastic gather
+pass, whichever lowers the image's expected error more per second (not in the paper).
+
+An Ercuts image is the sum of two independent estimates that are both means of independent
+passes: the direct-light passes (light seen directly or scattered once, and the paths through
+mirrors and glass the VPLs cannot carry, :mod:`.integrator`) and the stochastic gather's passes
+(:mod:`.gather`). The variance of a pixel's mean falls as v/n with the passes n, so one more
+pass lowers the error E = Σ_p v_p/n by E/(n + 1). Choosing, pass after pass, the estimator
+with the larger E/((n + 1)·τ) (τ its seconds per pass) spends the time where it buys the most,
+which converges to the optimum allocation of a budget between independent estimators with
+costs, n_i ∝ σ_i/√τ_i (Neyman's allocation with costs; Cochran, *Sampling Techniques*, 3rd
+ed. 1977, §5.5). E is measured from the passes' own spread (the sample variance of every
+pixel over the passes, :class:`PassVariance`) and weighted like the benchmarks' relMSE,
+Σ_p var_p / (Y_p² + 0.01) / N_pixels with Y_p the pixel's current luminance.
+
+Why it matters: a mirror or a glass pane that throws the light of a bright wall onto the room
+(paths the direct passes path-trace) makes the direct passes' variance dwarf the gather's,
+and a scene lit mostly directly has little for the gather to do; both spent their spare time
+on gather passes before.
+"""
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+#: The relMSE's regulariser (benchmarks/metrics.py): errors of dark pixels count as absolute.
+REL_EPS = 0.01
+
+
+class PassVariance:
+    """Per-pixel running mean and spread of one estimator's passes (their luminance).
+
+    Args:
+        n: pixels.
+    """
+
+    def __init__(self, n: int):
+        self.count = 0
+        self.s1 = np.zeros(n)
+        self.s2 = np.zeros(n)
+
+    def add(self, y: NDArray) -> None:
+        """One more pass: ``y`` (n,) the pixels' luminance in it."""
+        y = np.asarray(y, np.float64)
+        self.count += 1
+        self.s1 += y
+        self.s2 += y * y
+
+    def mean(self) -> NDArray:
+        """(n,) the pixels' mean luminance over the passes (0 before the first)."""
+        return self.s1 / max(self.count, 1)
+
+    def error(self, ref: NDArray) -> float:
+        """The relMSE-weighted variance of the pixels' means, mean_p var_p / n / (ref_p² +
+        :data:`REL_EPS`) (inf before two passes: the spread is unknown)."""
+        n = self.count
+        if n < 2:
+            return np.inf
+        m = self.s1 / n
+        var = np.maximum(self.s2 / n - m * m, 0.0) * n / (n - 1)     # per pass, unbiased
+        return float(np.mean(var / n / (np.asarray(ref) ** 2 + REL_EPS)))
+
+    def gain(self, ref: NDArray, seconds: float) -> float:
+        """Error removed per second by one more pass of ``seconds``: E/((n + 1)·τ)."""
+        return self.error(ref) / (self.count + 1) / max(seconds, 1e-9)
+
+
+class DirectRival:
+    """The direct-light passes as the gather's rival for spare time (module docstring).
+
+    Args:
+        run: ``run() -> bool`` renders one more direct pass into the direct film (adding its
+            pixels' luminance to ``variance``); False when it was cut short.
+        variance: the direct passes' :class:`PassVariance` so far.
+        seconds: the duration of one direct pass so far (mean).
+    """
+
+    def __init__(self, run: Callable[[int], bool], variance: PassVariance, seconds: float):
+        self.run, self.variance, self.seconds = run, variance, seconds
+        self.extra = 0                 # passes added for the gather's spare time
+
+    def gain(self, ref: NDArray) -> float:
+        return self.variance.gain(ref, self.seconds)
+
+    def step(self) -> bool:
+        """One more direct pass; False when it could not be completed."""
+        t0 = time.perf_counter()
+        done = self.run()
+        if done:
+            self.seconds = 0.5 * (self.seconds + (time.perf_counter() - t0))
+            self.extra += 1
+        return done

@@ -391,6 +391,15 @@ class Bsdf:
         smooth = self.delta | ((self.p_spec <= 0.0) & (self.p_tr <= 0.0))
         return smooth & ~self.is_diffuse & (self.kd.max(axis=1) <= 0.0)
 
+    @cached_property
+    def is_mirror_or_glass(self) -> B:
+        """(N,) bool: every lobe of the lane is a delta lobe (:attr:`is_delta`) or the glass
+        lobe (a smooth or rough dielectric interface, no diffuse or opaque specular part). No
+        VPL can shine through such a surface (its light comes through the object), so
+        ERCUTS's gather follows the camera through it (``vpl.follow_specular``)."""
+        glass = (self.p_tr > 0.0) & (self.p_spec <= 0.0) & (self.kd.max(axis=1) <= 0.0)
+        return self.is_delta | glass
+
     # -- evaluation -------------------------------------------------------------------
 
     def _flipped_normals(self, wo: F64) -> tuple[F64, F64]:

@@ -43,6 +43,13 @@ BDPT_FIXED_BYTES = 80 * MIB
 #: ERCUTS per shading point: G-buffer (positions, normals, directions, hit record) and the
 #: direct-light image with its light-sample temporaries.
 GBUFFER_POINT_BYTES = 300
+#: … plus, per shading point, the weight and flag of points moved through mirrors and glass
+#: (:func:`~ercuts_core.integrators.ercuts.vpl.follow_specular`) and the first-hit AOVs taken
+#: before (depth, normal, albedo: float64).
+GBUFFER_FOLLOW_BYTES = 3 * 8 + 1 + 7 * 8
+#: ERCUTS per pixel: the spread of the direct-light and gather passes (two running sums
+#: each, :mod:`~ercuts_core.integrators.ercuts.balance`) and a pass's luminance.
+BALANCE_PIXEL_BYTES = 5 * 8
 #: One path of K vertex slots (position, two normals, material) plus its raster/ids.
 PATH_SLOT_BYTES = 3 * 3 * 8 + 8
 PATH_FIXED_BYTES = 40
@@ -138,7 +145,8 @@ def fixed_parts(n_pixels: int, n_triangles: int, settings: RenderSettings) -> di
         "films": n_pixels * channels * (8 * films + OUTPUT_BYTES_PER_CHANNEL),
     }
     if ercuts:
-        parts["G-buffer"] = n_pixels * s.shading_samples * GBUFFER_POINT_BYTES
+        parts["G-buffer"] = (n_pixels * s.shading_samples * (GBUFFER_POINT_BYTES + GBUFFER_FOLLOW_BYTES)
+                             + n_pixels * BALANCE_PIXEL_BYTES)
         chains = _chains(n_pixels, s)
         parts["VPLs"] = int(chains * (VPL_SLOTS_PER_CHAIN * VPL_SLOT_BYTES + VPLS_PER_CHAIN * VPL_BYTES))
     return parts

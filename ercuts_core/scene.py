@@ -95,6 +95,9 @@ class BuiltScene:
         self.camera = Camera(desc.camera)
         self.scene_radius = self.lights.radius
         self.has_delta = _has_delta(desc.materials, self.tri_mat)
+        #: Some triangle's material may be a mirror or glass only (``Bsdf.is_mirror_or_glass``,
+        #: conservative: any transmission): ERCUTS's gather follows the camera through them.
+        self.has_mirror_or_glass = self.has_delta or _has_transmission(desc.materials, self.tri_mat)
 
     def intersect(self, o: NDArray, d: NDArray, tmax=None) -> Surface:
         """Trace rays and return their surface interactions."""
@@ -179,6 +182,14 @@ class BuiltScene:
 
     def close(self) -> None:
         self.tracer.close()
+
+
+def _has_transmission(mats, tri_mat: NDArray) -> bool:
+    """True when some triangle's material transmits (a glass lobe, constant or programmed)."""
+    used = np.unique(tri_mat)
+    used = used[(used >= 0) & (used < mats.n_materials)]
+    programs = [mats.programs[i] for i in used] if mats.has_programs else []
+    return bool((np.asarray(mats.transmission)[used] > 0).any() or any('"transmission"' in p for p in programs))
 
 
 def _has_delta(mats, tri_mat: NDArray) -> bool:

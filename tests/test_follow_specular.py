@@ -26,7 +26,7 @@ from ercuts_core.description import CameraDesc, MaterialTable, MeshTable, SceneD
 from ercuts_core.film import Film
 from ercuts_core.integrators.bdpt import BDPTIntegrator
 from ercuts_core.integrators.ercuts import integrator as ercuts_integrator
-from ercuts_core.integrators.ercuts.vpl import build_gbuffer, follow_specular
+from ercuts_core.integrators.ercuts.vpl import build_gbuffer, first_hits_only, follow_specular
 from ercuts_core.integrators.path import PathIntegrator
 from ercuts_core.sampling import luminance
 from ercuts_core.scene import BuiltScene
@@ -58,17 +58,19 @@ def test_points_on_a_mirror_move_to_what_it_shows_with_weight_f():
     scene = BuiltScene(_scene([(mirror, 0), (ceiling, 1)], mats))
     assert scene.has_delta
     g, _ = build_gbuffer(scene, 2, np.random.default_rng(0))
+    assert g.weight is None and g.valid.all()
+    first = g.p.copy()
+    np.testing.assert_allclose(first[:, 1] + first[:, 2], 0.0, atol=1e-9)   # on the mirror
     f = follow_specular(scene, g, np.random.default_rng(1))
-    assert g.weight is None and f.through.all() and f.valid.all()
+    assert f is g and f.through.all() and f.valid.all()
+    assert not first_hits_only(f).valid.any()                               # E1 sees none of them
     np.testing.assert_allclose(f.p[:, 1], 3.0, atol=1e-6)                   # on the ceiling
     # straight above (up to the ray offset off the mirror, tracer.epsilon ≈ 1e-5 here)
-    np.testing.assert_allclose(f.p[:, [0, 2]], g.p[:, [0, 2]], atol=1e-4)
+    np.testing.assert_allclose(f.p[:, [0, 2]], first[:, [0, 2]], atol=1e-4)
     np.testing.assert_allclose(f.wo, np.tile([0.0, -1.0, 0.0], (len(f.p), 1)), atol=1e-9)
     np.testing.assert_allclose(f.ns, np.tile([0.0, -1.0, 0.0], (len(f.p), 1)), atol=1e-9)
     F = schlick_fresnel(np.array([np.sqrt(0.5)]), R[None, :], np.ones((1, 3)))[0]
     np.testing.assert_allclose(f.weight, np.tile(F, (len(f.p), 1)), rtol=1e-6)   # float geometry
-    # the first hits are left alone (E1, AOVs and alpha use them)
-    assert np.allclose(g.p[:, 1] + g.p[:, 2], 0.0, atol=1e-9)
 
 
 def test_points_on_glass_see_through_with_the_transmittance_as_mean_weight():

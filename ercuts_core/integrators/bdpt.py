@@ -133,16 +133,19 @@ def _column_views(obj, data: NDArray) -> None:
         setattr(obj, name, data[..., col])
 
 
-def _delta_counts(cam: "Subpaths", lig: "Subpaths") -> tuple[NDArray, NDArray, NDArray]:
-    """Per subpath vertex k (V, N): the delta events at camera vertices 0 … k, whether one of
-    them is *late* — not part of the camera-side prefix of purely delta surfaces (mirrors,
-    smooth glass) that ERCUTS's gather follows (:func:`~.ercuts.vpl.follow_specular`) — and
-    the delta events at light vertices 0 … k."""
-    pure = cam.delta & ~cam.connectible
-    pure[0] = True                                  # the camera vertex starts every prefix
-    late = cam.delta & ~np.logical_and.accumulate(pure, axis=0)
-    return (np.cumsum(cam.delta, axis=0), np.logical_or.accumulate(late, axis=0),
-            np.cumsum(lig.delta, axis=0))
+def _delta_counts(cam: "Subpaths", lig: "Subpaths") -> tuple[NDArray, ...]:
+    """Per subpath vertex k (V, N), for classifying paths by :meth:`BDPTIntegrator._count_delta`:
+    the delta events at vertices 1 … k of each subpath, the camera subpath's leading vertices
+    on mirrors and glass among 1 … k (``Bsdf.is_mirror_or_glass``: the prefix ERCUTS's gather
+    follows, :func:`~.ercuts.vpl.follow_specular`), and the light subpath's run of such
+    vertices ending at k."""
+    cam_clear = cam.clear.copy()
+    cam_clear[0] = True                           # the camera vertex starts every prefix
+    lead = np.cumsum(np.logical_and.accumulate(cam_clear, axis=0), axis=0) - 1
+    run = np.zeros(lig.clear.shape, np.int64)
+    for k in range(1, len(run)):
+        run[k] = np.where(lig.clear[k], run[k - 1] + 1, 0)
+    return np.cumsum(cam.delta, axis=0), lead, np.cumsum(lig.delta, axis=0), run
 
 
 @dataclass
@@ -200,6 +203,8 @@ class Subpaths:
             then pdf_fwd of vertex k + 1 and pdf_rev of vertex k − 1 are 0.
         connectible: (V, N) False where every lobe of the vertex's BSDF is a delta lobe
             (``Bsdf.is_delta``, pbrt ``IsConnectible``); True where no BSDF was built.
+        clear: (V, N) the vertex's BSDF is a mirror or glass only (``Bsdf.is_mirror_or_glass``;
+            the path classes of :meth:`BDPTIntegrator._count_delta`); False where none was built.
         reflect_only: (V, N) the vertex's BSDF has no glass lobe, so f = 0 unless wo and wi
             lie on one side (connection rows are pre-filtered by side only there; rough
             glass transmits through ``eval``); False where no BSDF was built.
@@ -221,6 +226,7 @@ class Subpaths:
         self.env = np.zeros((V, N), bool)
         self.delta = np.zeros((V, N), bool)
         self.connectible = np.ones((V, N), bool)
+        self.clear = np.zeros((V, N), bool)
         self.reflect_only = np.zeros((V, N), bool)
         self.count = np.ones(N, np.int64)
         #: (3, N, 3) camera subpaths: lights with a shape met after delta events only
@@ -377,23 +383,26 @@ class BDPTIntegrator(Integrator):
 
     def _count_delta(self, lane: NDArray, s: NDArray, t: NDArray, c: NDArray) -> NDArray:
         """Classify connection rows (lane, s, t) by their path and count their energies Y(c)
-        (one pass's units): returns (R,) bool, the path is *traced* — it has a late delta
-        event (after another scattering vertex, or at a surface with a continuous lobe too:
-        :func:`_delta_counts`) or at most one scattering vertex that is not a camera-side
-        prefix delta event (what ERCUTS's direct passes render when its gather follows the
-        camera through mirrors and windows). Of the rows with s + t − 2 ≥ 2 scattering
-        vertices, those with a delta event — at a camera vertex 1 … t − 2 or a light vertex
-        1 … s − 2 (the connection vertices are never delta) — add to :attr:`delta_indirect`,
-        and the traced ones among them to :attr:`traced_indirect`."""
-        cam_n, cam_late, lig_n = self._delta_counts
-        tc, sc = np.maximum(t - 2, 0), np.maximum(s - 2, 0)
-        n_cam = np.where(t >= 2, cam_n[tc, lane], 0)
-        n_lig = np.where(s >= 2, lig_n[sc, lane], 0)
+        (one pass's units). A path's *prefix* is its run of scattering vertices on mirrors
+        and glass from the camera on (camera vertices 1 … t − 1, then light vertices s − 1,
+        s − 2, …; :func:`_delta_counts`); returns (R,) bool, the path is *traced* — it has a
+        delta event outside the prefix or at most one scattering vertex outside it: what
+        ERCUTS's direct passes render when its gather follows the camera through mirrors and
+        glass (``PathIntegrator(paths='direct_and_late_delta')``). Of the rows with
+        s + t − 2 ≥ 2 scattering vertices, those with a delta event — at a camera vertex
+        1 … t − 2 or a light vertex 1 … s − 2 (a connection vertex is never one) — add to
+        :attr:`delta_indirect`, and the traced ones among them to :attr:`traced_indirect`."""
+        cam_dc, cam_lead, lig_dc, lig_run = self._delta_counts
         scatter = s + t - 2
-        late = np.where(t >= 2, cam_late[tc, lane], False) | (n_lig > 0)
-        prefix = np.where(late, 0, n_cam)          # without a late event every camera delta is prefix
-        traced = late | (scatter - prefix <= 1)
-        d = (n_cam + n_lig > 0) & (scatter >= 2)
+        cam_sc = np.maximum(np.where(s >= 1, t - 1, t - 2), 0)    # camera scattering vertices
+        lead = cam_lead[cam_sc, lane]
+        m = np.where((lead == cam_sc) & (s >= 2), np.minimum(lig_run[np.maximum(s - 1, 0), lane], s - 1), 0)
+        tc, sc = np.maximum(t - 2, 0), np.maximum(s - 2, 0)
+        total = cam_dc[tc, lane] + lig_dc[sc, lane]
+        in_prefix = cam_dc[np.minimum(lead, tc), lane] + np.where(
+            m >= 2, lig_dc[sc, lane] - lig_dc[np.maximum(s - m - 1, 0), lane], 0)
+        traced = (total > in_prefix) | (scatter - lead - m <= 1)
+        d = (total > 0) & (scatter >= 2)
         if d.any():
             y = luminance(c[d])
             self.delta_indirect += float(y.sum())
@@ -535,6 +544,7 @@ class BDPTIntegrator(Integrator):
             if last and not (film is not None and k == 1):
                 break
             bsdf = scene.bsdf(surf.mat, ns, ng, p)
+            path.clear[k, lanes] = bsdf.is_mirror_or_glass
             if film is not None and k == 1:
                 self.record_first_hit(film, pix, keep, surf, bsdf)
             if last:

@@ -41,13 +41,13 @@ class PathIntegrator(Integrator):
     'direct_and_delta', those plus the paths with at most one scattering vertex (light seen
     directly and scattered once: ERCUTS's direct-light passes). 'direct_and_late_delta' is
     the complement of what ERCUTS's gather renders when it follows the camera through
-    mirrors and smooth glass (:func:`~.ercuts.vpl.follow_specular`): paths with at most one
-    scattering vertex that is not a delta event of a purely delta surface met before any
-    other vertex (light seen directly, in a mirror or through a window, and direct light at
-    the first other surface), and paths with a *late* delta event (after another vertex, or
-    at a surface that also has a continuous lobe: caustics, a lamp behind glass). Without
-    delta materials in the scene (``BuiltScene.has_delta``) the last three stop after the
-    first bounce.
+    mirrors and glass (:func:`~.ercuts.vpl.follow_specular`): paths with at most one
+    scattering vertex besides a *prefix* — the vertices on mirrors and glass
+    (``Bsdf.is_mirror_or_glass``) met before any other — (light seen directly, in a mirror or
+    through a window, and direct light at the first other surface), and paths with a *late*
+    delta event (outside the prefix: caustics, a lamp behind glass). Without delta materials
+    in the scene (``BuiltScene.has_delta``; for the last set, without mirrors and glass,
+    ``has_mirror_or_glass``) the last three stop after the first bounce.
     """
 
     def __init__(self, scene, settings, paths: str = "all"):
@@ -56,14 +56,15 @@ class PathIntegrator(Integrator):
             raise ValueError(f"unknown path set {paths!r}; expected one of {PATH_SETS}")
         self.paths = paths
         self.max_depth = settings.max_depth
-        if paths != "all" and not scene.has_delta:
+        if paths != "all" and not (scene.has_mirror_or_glass if paths == "direct_and_late_delta"
+                                   else scene.has_delta):
             self.max_depth = min(self.max_depth, 1)
 
     def _counted(self, scatter: int, seen: NDArray, late: NDArray, nd: NDArray) -> NDArray:
         """(N,) bool: which of a bounce's contributions with ``scatter`` scattering vertices
         are added, from ``seen`` (N,) (the path has a delta vertex), ``late`` (N,) (it has
-        a late one, see the class docstring) and ``nd`` (N,) (its scattering vertices that
-        are not prefix delta events)."""
+        a late one, see the class docstring) and ``nd`` (N,) (its scattering vertices outside
+        the prefix of mirrors and glass)."""
         if self.paths == "all":
             return np.ones(len(seen), bool)
         if self.paths == "delta":
@@ -83,8 +84,8 @@ class PathIntegrator(Integrator):
         prev_pdf = np.zeros(n)             # BSDF pdf of the ray that led here (0: camera ray)
         prev_delta = np.zeros(n, bool)     # that ray came from a delta lobe (no MIS: weight 1)
         seen = np.zeros(n, bool)           # the path so far has a delta vertex
-        late = np.zeros(n, bool)           # … one after another vertex or on a mixed surface
-        nd = np.zeros(n, np.int64)         # vertices so far that were not prefix delta events
+        late = np.zeros(n, bool)           # … one outside the prefix of mirrors and glass
+        nd = np.zeros(n, np.int64)         # vertices so far outside that prefix
         prev_p = np.zeros((n, 3))
         alpha = None
         for depth in range(self.max_depth + 1):

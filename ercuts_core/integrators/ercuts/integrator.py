@@ -104,7 +104,8 @@ from .progressive import (iteration_end, iteration_settings, iteration_target, m
 from .paths import PathBatch
 from .seeding import seed_paths
 from . import warm_up
-from .vpl import SPECULAR_BOUNCES, GBuffer, build_gbuffer, follow_specular, g_clamp, make_vpls
+from .vpl import (SPECULAR_BOUNCES, GBuffer, build_gbuffer, first_hits_only, follow_specular, g_clamp,
+                  make_vpls)
 
 #: The gather shades what perfect mirrors show and smooth glass lets through with the VPLs
 #: (algorithm.md §G.3, :func:`~.vpl.follow_specular`); False = the ablation: every path with
@@ -211,9 +212,9 @@ class ErcutsIntegrator:
             window = self.scene.camera.window
             jitter = stratified_jitter(window.n_pixels, s.shading_samples, self.base_seed, self.iteration)
             g, _ = build_gbuffer(self.scene, s.shading_samples, rng, jitter, poll=self._gbuffer_poll)
-            # the gather's points: what mirrors show and windows let through (§G.3)
-            g_gather = (follow_specular(self.scene, g, rng, min(SPECULAR_BOUNCES, s.max_depth - 2))
-                        if follow else g)
+            first_hits = self._first_hit_aovs(g)
+            if follow:     # the gather's points: what mirrors show and windows let through (§G.3)
+                follow_specular(self.scene, g, rng, min(SPECULAR_BOUNCES, s.max_depth - 2))
             if s.direct_vpls:
                 base, alpha = self._direct_image(g, rng), self._alpha(g)
                 P = max(P_all - float(luminance(base.sum(axis=0)).sum()), 0.0)
@@ -232,15 +233,13 @@ class ErcutsIntegrator:
         self._check()
         gmax = g_clamp(self.scene, s.clamp)
         with self._phase("vpls"):                 # 3. VPLs
-            vpls = self._make_vpls(g, chains, e_d, gmax, rng)
+            vpls = self._make_vpls(first_hits_only(g), chains, e_d, gmax, rng)
         with self._phase("tree"):                 # 4. light tree
             tree = self._light_tree(vpls)
         with self._phase("cuts", check=False):    # 5. lightcuts (or the brute-force ablation)
-            gathered = self._gather(g_gather, vpls, tree, gmax, base, alpha)
+            gathered = self._gather(g, vpls, tree, gmax, base, alpha)
         if self.direct_rival is not None and self.direct_rival.extra:   # spare time went there too
-            direct = self.direct_film
-            base, alpha = direct.light_parts(), direct.alpha / max(direct.passes_done, 1)
-            stats["direct_samples"] = direct.passes_done
+            stats["direct_samples"] += self.direct_rival.extra
             stats["direct_samples_for_spare_time"] = self.direct_rival.extra
         scale = self._energy_scale(gathered, vpls, P)
         light = self._compose(base, gathered.parts, vpls, scale)
@@ -248,7 +247,7 @@ class ErcutsIntegrator:
             missing = np.flatnonzero(~gathered.complete)
             light[:, missing] = rough.full_parts(missing)[0]
         film.set_pixels(light, alpha)
-        self._finish(film, g, chains, vpls, gathered, scale)
+        self._finish(film, first_hits, chains, vpls, gathered, scale)
 
     def _gbuffer_poll(self, f: float) -> None:
         """Progress while the G-buffer is traced; stop the render (:class:`_Stopped`) on Esc."""
@@ -310,27 +309,36 @@ class ErcutsIntegrator:
         t0 = time.perf_counter()
         direct = self._passes(path, "Direct light", (0xD1,), "direct", show=False,
                               samples=self.settings.direct_samples, on_pass=on_pass)
-        self.stats["direct_samples"] = direct.passes_done
+        self.stats["direct_samples"] = n_done = direct.passes_done
+        base, alpha = direct.light_parts(), direct.alpha / max(n_done, 1)
+        seconds = (time.perf_counter() - t0) / max(n_done, 1)
+        del direct                                       # (its AOVs are not needed: 1080p memory)
 
         def one_more() -> bool:
-            # started only with time for it (gather.py): the time limit is not checked inside,
-            # a cancel is (through the render clock's progress callback)
-            before, clock = direct.passes_done, Clock(0.0, self.clock.poll)
-            run_passes(path, direct, clock, samples=1, batch=batch_pixels(self.memory, self.settings),
-                       phase="Lightcuts", key=(0xD1,), first=before, show=False, on_pass=on_pass,
-                       fraction=lambda f: self.schedule.fraction("Lightcuts", 1.0))
-            return variance.count == direct.passes_done > before
+            """One more pass averaged into ``base`` and ``alpha`` in place (the gather's
+            spare time, :mod:`.balance`); started only with time for it, so the time limit
+            is not checked inside, a cancel is (the render clock's progress callback)."""
+            nonlocal n_done
+            part = run_passes(path, Film(path.window), Clock(0.0, self.clock.poll), samples=1,
+                              batch=batch_pixels(self.memory, self.settings), phase="Lightcuts",
+                              key=(0xD1,), first=n_done, show=False, on_pass=on_pass,
+                              fraction=lambda f: self.schedule.fraction("Lightcuts", 1.0))
+            if variance.count != n_done + 1:
+                return False
+            w = 1.0 / (n_done + 1)
+            base[:] = base * (1.0 - w) + part.light_parts() * w
+            alpha[:] = alpha * (1.0 - w) + part.alpha * w
+            n_done += 1
+            return True
 
-        self.direct_film = direct
-        self.direct_rival = DirectRival(one_more, variance,
-                                        (time.perf_counter() - t0) / max(direct.passes_done, 1))
-        return direct.light_parts(), direct.alpha / max(direct.passes_done, 1)
+        self.direct_rival = DirectRival(one_more, variance, seconds)
+        return base, alpha
 
     def _follows_specular(self) -> bool:
-        """The gather follows the camera through perfect mirrors and smooth glass
-        (:func:`~.vpl.follow_specular`): with ``direct_light='NEE'`` in scenes with delta
+        """The gather follows the camera through perfect mirrors and glass
+        (:func:`~.vpl.follow_specular`): with ``direct_light='NEE'`` in scenes with such
         materials, unless :data:`FOLLOW_SPECULAR` (the ablation) is off."""
-        return FOLLOW_SPECULAR and not self.settings.direct_vpls and self.scene.has_delta
+        return FOLLOW_SPECULAR and not self.settings.direct_vpls and self.scene.has_mirror_or_glass
 
     def _delta_paths(self) -> NDArray:
         """(3, h·w, 3) light passes of the paths through a mirror or smooth glass
@@ -548,18 +556,23 @@ class ErcutsIntegrator:
             stats[f"accepted_{name}"] = int(chains.accepted[i])
             stats[f"acceptance_{name}"] = float(chains.accepted[i] / chains.proposed[i]) if chains.proposed[i] else 0.0
 
-    def _finish(self, film: Film, g: GBuffer, chains, vpls, gathered: Gathered, scale: float) -> None:
-        """First-hit and Ercuts AOVs of the one-pass result (module docstring)."""
-        window = self.scene.camera.window
-        n, S = window.n_pixels, g.samples
+    def _first_hit_aovs(self, g: GBuffer) -> dict[str, NDArray]:
+        """The first-hit AOVs 'depth', 'normal', 'albedo' of the shading points, per pixel
+        (taken before :func:`~.vpl.follow_specular` moves points on mirrors and glass)."""
+        n, S = self.scene.camera.window.n_pixels, g.samples
         h = np.flatnonzero(g.valid)
         depth = np.where(g.valid, g.surf.t, 1e10)[:, None]
         albedo = np.zeros((len(g.pixel), 3))
         if len(h):
             albedo[h] = self.scene.bsdf(g.mat[h], g.ns[h], g.ng[h], g.p[h]).albedo()
-        film.aov_sum["depth"] = per_pixel(depth, n, S)
-        film.aov_sum["normal"] = per_pixel(np.where(g.valid[:, None], g.ns, 0.0), n, S)
-        film.aov_sum["albedo"] = per_pixel(albedo, n, S)
+        return {"depth": per_pixel(depth, n, S),
+                "normal": per_pixel(np.where(g.valid[:, None], g.ns, 0.0), n, S),
+                "albedo": per_pixel(albedo, n, S)}
+
+    def _finish(self, film: Film, first_hits: dict, chains, vpls, gathered: Gathered, scale: float) -> None:
+        """First-hit (``first_hits``, :meth:`_first_hit_aovs`) and Ercuts AOVs of the one-pass
+        result (module docstring)."""
+        film.aov_sum.update(first_hits)
         film.aov_sum["chain_deposits"] = chains.deposits_per_pixel[:, None].astype(np.float64)
         film.aov_sum["cut_size"] = gathered.cut
         film.aov_sum["vpl_density"] = self._vpl_density(vpls)[:, None]

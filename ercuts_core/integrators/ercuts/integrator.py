@@ -61,18 +61,31 @@ Passes (``RenderResult.aovs``), per pixel:
   its VPL; paths through delta lobes are path-traced, below), so er_caustic is a *part* of
   direct + indirect, not an addition to the image; 0 in scenes without glossy surfaces and
   fallback deposits.
-
-Mirrors and smooth glass (delta lobes, :mod:`ercuts_core.bsdf`). A VPL cannot light a delta
-lobe, nor stand for light leaving one, so the light is split by path: paths without a delta
-event take the five steps; every path with one (a mirror seen from the camera, a lamp behind
-glass, caustics) is path-traced with next-event estimation and MIS in the direct-light
-passes (``PathIntegrator(paths='direct_and_delta')``, or ``paths='delta'`` with
-``direct_light='VPL'``), and its energy there is taken out of P (``stats['P_delta']``). The
-chains reject delta events, BDPT seeds through a delta vertex are dropped, and delta lobes'
-lightcut bounds are 0. Scenes without delta materials (``BuiltScene.has_delta``) are
-rendered exactly as before.
 * 'cut_size' (h, w, 1) mean lightcut size, 'chain_deposits' (h, w, 1) chain states whose
   x1 lies in the pixel, and 'depth', 'normal', 'albedo' of the first shading point.
+
+Mirrors and glass (delta lobes and the glass lobe, :mod:`ercuts_core.bsdf`). A VPL cannot
+light a delta lobe nor shine through glass, nor stand for light leaving a delta lobe, so the
+light is split by path. (1) The gather's shading points follow the camera through mirrors
+and glass to the first other surface (:func:`~.vpl.follow_specular`, algorithm.md §G.3):
+what a mirror shows or a window lets through is gathered from the VPLs there, weighted by the
+mirror's and glass's sample weights (with ``direct_light='NEE'``; the ablation
+:data:`FOLLOW_SPECULAR` = False gathers at the first hit). (2) Every path with a delta event
+outside that camera-side prefix (caustics, a lamp behind glass, light a mirror throws on a
+wall), and light seen directly or scattered once beyond the prefix, is path-traced with
+next-event estimation and MIS in the direct-light passes
+(``PathIntegrator(paths='direct_and_late_delta')``; without following,
+``paths='direct_and_delta'``: every delta path; ``paths='delta'`` with
+``direct_light='VPL'``). (3) The chains carry the delta-free paths only: P leaves out the
+rough BDPT image's delta paths (``stats['P_delta']``, BDPT's own count, light tracing
+included; ``stats['P_traced']`` the part the direct passes render, which sizes their
+phase), the chains reject delta events, BDPT seeds through a delta vertex are dropped, and
+delta lobes' lightcut bounds are 0. Scenes without mirrors and glass
+(``BuiltScene.has_mirror_or_glass``) are rendered exactly as before.
+
+Spare time (:mod:`.balance`): when the last iteration fills its time, each further pass goes
+to the direct-light passes or to the stochastic gather, whichever lowers the image's measured
+error more per second.
 """
 from __future__ import annotations
 

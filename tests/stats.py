@@ -431,6 +431,12 @@ class ImageComparison:
                 f"deff {np.round(self.deff, 2)}")
 
 
+#: Relative difference of noise-free pixels that is float32 accumulation, not a disagreement:
+#: a render sums up to a few hundred float32 samples per pixel (256·2⁻²⁴ ≈ 1.5·10⁻⁵); Cycles'
+#: sky seen directly reads 0.59999925 for 0.6.
+FLOAT_RTOL = 2e-5
+
+
 def _block_moments(runs: list, block: int) -> tuple[F64, F64, F64, F64, float]:
     """Block means (By, Bx, 3), their variance, its Satterthwaite degrees of freedom, and the
     between-seed variance of single-seed block means, from S ≥ 2 renders (h, w, ≥ 3)."""
@@ -471,8 +477,9 @@ def compare_images(ours: list, ref: list, block: int = 8, significance: float = 
        normal z with the same tail probability (Student's t with the combined
        Satterthwaite degrees of freedom).
 
-    Blocks where both renderers are noise-free are left out when equal (a black
-    background) and count as infinitely far apart otherwise. The renderers agree when, for
+    Blocks where both renderers are noise-free (a background, the sky in a perfect mirror)
+    are left out when they agree to float32 accumulation (relative :data:`FLOAT_RTOL`) and
+    count as infinitely far apart otherwise. The renderers agree when, for
     each channel, Σ z² over its blocks is within the χ²(blocks) tail and the largest |z|
     of all block channels within its Šidák-corrected normal tail, each at
     ``significance``/2 (the channel χ² tests Bonferroni-corrected over the three channels).
@@ -493,8 +500,9 @@ def compare_images(ours: list, ref: list, block: int = 8, significance: float = 
     z = np.zeros(diff.shape)
     t = np.divide(diff, np.sqrt(var), out=np.zeros(diff.shape), where=noisy)
     z[noisy] = np.sign(t[noisy]) * norm.isf(t_dist.sf(np.abs(t[noisy]), np.maximum(dof[noisy], 1.0)))
-    z[~noisy & (diff != 0)] = np.inf
-    counted = noisy | (diff != 0)
+    off = ~noisy & (np.abs(diff) > FLOAT_RTOL * np.maximum(np.abs(mo), np.abs(mr)) + 1e-12)
+    z[off] = np.inf
+    counted = noisy | off
     blocks = counted.reshape(-1, 3).sum(axis=0)
     chi2 = (z ** 2).reshape(-1, 3).sum(axis=0)
     p_chi2 = np.array([chi2_dist.sf(c, k) if k > 0 else 1.0 for c, k in zip(chi2, blocks)])

@@ -49,12 +49,14 @@ def unsampled_emission(name: str, color=(1, 1, 1), strength: float = 1.0):
 
 
 def render_seeds(tmp_path, tag: str, integrator: str, *, samples: int, cycles_samples: int,
-                 max_depth: int, size=(W, H), inject=None, seeds=SEEDS):
+                 max_depth: int, size=(W, H), inject=None, seeds=SEEDS, cycles_seeds=SEEDS,
+                 ercuts_settings=None):
     """(ercuts renders, cycles renders), one (h, w, 4) image per seed, of the current scene.
 
     ``inject``: optional callable run before the Ercuts renders that changes the scene and
     returns a callable restoring it (an error the comparison must detect); Cycles always
-    renders the scene as built.
+    renders the scene as built. ``seeds``/``cycles_seeds``: the seeds of each engine;
+    ``ercuts_settings``: ERCUTS's settings (default :data:`ERCUTS_SETTINGS`).
     """
     s = bpy.context.scene
     s.render.resolution_x, s.render.resolution_y = size
@@ -66,13 +68,13 @@ def render_seeds(tmp_path, tag: str, integrator: str, *, samples: int, cycles_sa
         e = s.ercuts
         e.integrator, e.samples, e.max_depth, e.seed = integrator, samples, max_depth, seed
         if integrator == "ERCUTS":
-            for key, value in ERCUTS_SETTINGS.items():
+            for key, value in (ercuts_settings or ERCUTS_SETTINGS).items():
                 setattr(e, key, value)
         ercuts.append(h.render_exr(tmp_path / f"{tag}_{integrator}_{seed}.exr"))
     if undo is not None:
         undo()
     cycles = []
-    for seed in seeds:
+    for seed in cycles_seeds:
         key = (tag, seed, cycles_samples, max_depth, tuple(size))
         if key not in _CYCLES:
             _cycles(s, max_depth, cycles_samples, seed)

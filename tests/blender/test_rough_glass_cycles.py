@@ -47,7 +47,7 @@ from mathutils import Vector
 
 import blender_helpers as h
 import ercuts_core  # noqa: F401  (a missing core must fail these tests)
-from cycles_stats import INJECT, compare, render_seeds, unsampled_emission
+from cycles_stats import INJECT, SEEDS, compare, render_seeds, unsampled_emission
 
 V = bpy.app.version
 pytestmark = pytest.mark.slow
@@ -60,6 +60,16 @@ ERCUTS_ROUGH_GLASS = pytest.mark.xfail(strict=True, reason=(
     "ERCUTS's gather drops VPL light arriving at rough glass from behind the surface "
     "(gather.py: ShadingPoints without transmissive): rough sphere −10 % in the image mean, "
     "8×8 block mean z² 516, the sphere black (bpy 5.0.1, 48×36, 64 spp)"))
+
+
+#: ERCUTS, a strict xfail in the rough-glass scenes, renders two seeds with shorter phases
+#: (CI time): it misses by 20σ and more either way.
+ERCUTS_XFAIL = dict(seeds=SEEDS[:2], ercuts_settings=dict(
+    rough_samples=8, direct_samples=16, chain_length=50, stochastic_passes=4, e1_samples=128))
+
+
+def _extra(integrator):
+    return ERCUTS_XFAIL if integrator == "ERCUTS" else {}
 
 
 def _skip_rough_glass_on_3x():
@@ -113,19 +123,20 @@ SPHERE = dict(samples=32, cycles_samples=128, max_depth=5)
 def test_rough_glass_sphere_agrees_with_cycles(tmp_path, integrator):
     _skip_rough_glass_on_3x()
     rough_sphere_scene()
-    e, c = render_seeds(tmp_path, "rough_sphere", integrator, **SPHERE)
+    e, c = render_seeds(tmp_path, "rough_sphere", integrator, **_extra(integrator), **SPHERE)
     result = compare(f"rough_sphere/{integrator}", e, c)
     assert result.passed, result.summary()
 
 
 @pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
-def test_rough_glass_sphere_detects_a_wrong_ior(tmp_path):
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT"])
+def test_rough_glass_sphere_detects_a_wrong_ior(tmp_path, integrator):
     _skip_rough_glass_on_3x()
     rough_sphere_scene()
     mat = bpy.data.materials["RoughGlass"]
-    e, c = render_seeds(tmp_path, "rough_sphere", "PATH", inject=lambda: _set_input(mat, "IOR", 1.4),
-                        **SPHERE)
-    assert not compare("rough_sphere/PATH, IOR 1.4 exported", e, c).passed
+    e, c = render_seeds(tmp_path, "rough_sphere", integrator,
+                        inject=lambda: _set_input(mat, "IOR", 1.4), **SPHERE)
+    assert not compare(f"rough_sphere/{integrator}, IOR 1.4 exported", e, c).passed
 
 
 # --------------------------------------------------------------------------- glossy sweep (Veach)
@@ -172,12 +183,13 @@ def test_glossy_sweep_agrees_with_cycles(tmp_path, integrator):
 
 
 @pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
-def test_glossy_sweep_detects_a_wrong_roughness(tmp_path):
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
+def test_glossy_sweep_detects_a_wrong_roughness(tmp_path, integrator):
     glossy_sweep_scene()
     mat = bpy.data.materials["Glossy3"]
-    e, c = render_seeds(tmp_path, "glossy_sweep", "PATH",
+    e, c = render_seeds(tmp_path, "glossy_sweep", integrator,
                         inject=lambda: _set_input(mat, "Roughness", 0.45), **SWEEP)
-    assert not compare("glossy_sweep/PATH, plate 0.55 exported as 0.45", e, c).passed
+    assert not compare(f"glossy_sweep/{integrator}, plate 0.55 exported as 0.45", e, c).passed
 
 
 # --------------------------------------------------------------------------- lamp behind frosted glass
@@ -197,22 +209,66 @@ def frosted_lamp_scene():
 
 
 FROSTED = dict(samples=32, cycles_samples=128, max_depth=5)
+#: BDPT: half the samples (three times PATH's cost per sample, less noise through the pane)
+FROSTED_BDPT_SAMPLES = 16
 
 
 @pytest.mark.parametrize("integrator", ["PATH", "BDPT", pytest.param("ERCUTS", marks=ERCUTS_ROUGH_GLASS)])
 def test_lamp_behind_frosted_glass_agrees_with_cycles(tmp_path, integrator):
     _skip_rough_glass_on_3x()
     frosted_lamp_scene()
-    e, c = render_seeds(tmp_path, "frosted_lamp", integrator, **FROSTED)
+    settings = dict(FROSTED, samples=FROSTED_BDPT_SAMPLES) if integrator == "BDPT" else FROSTED
+    e, c = render_seeds(tmp_path, "frosted_lamp", integrator, **_extra(integrator), **settings)
     result = compare(f"frosted_lamp/{integrator}", e, c)
     assert result.passed, result.summary()
 
 
 @pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
-def test_lamp_behind_frosted_glass_detects_a_wrong_roughness(tmp_path):
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT"])
+def test_lamp_behind_frosted_glass_detects_a_wrong_roughness(tmp_path, integrator):
     _skip_rough_glass_on_3x()
     frosted_lamp_scene()
     mat = bpy.data.materials["Frosted"]
-    e, c = render_seeds(tmp_path, "frosted_lamp", "PATH",
-                        inject=lambda: _set_input(mat, "Roughness", 0.45), **FROSTED)
-    assert not compare("frosted_lamp/PATH, roughness 0.45 exported", e, c).passed
+    settings = dict(FROSTED, samples=FROSTED_BDPT_SAMPLES) if integrator == "BDPT" else FROSTED
+    e, c = render_seeds(tmp_path, "frosted_lamp", integrator,
+                        inject=lambda: _set_input(mat, "Roughness", 0.5), **settings)
+    assert not compare(f"frosted_lamp/{integrator}, roughness 0.5 exported", e, c).passed
+
+
+# --------------------------------------------------------------------------- rough slab transmittance
+
+def rough_slab_scene(light_sampled: bool):
+    """An orthographic camera looks down through a rough glass slab (roughness 0.6, IOR 1.5,
+    5 cm thick, tilted 45°) at a uniform emitter filling the lower hemisphere; black world:
+    every pixel is the slab's directional transmittance (internal reflections included)."""
+    cam = h.camera(location=(0, 0, 5), target=(0, 0, 0))
+    cam.data.type, cam.data.ortho_scale = "ORTHO", 0.5
+    slab = h.box("Slab", size=(4, 4, 0.05), material=_glass("Slab", 0.6))
+    slab.rotation_euler = (math.radians(45), 0, 0)
+    emitter = h.emission("Below", (1, 1, 1), 1.0) if light_sampled else unsampled_emission("Below")
+    h.plane("Below", size=200, location=(0, 0, -1), material=emitter)
+
+
+SLAB = dict(samples=128, cycles_samples=512, max_depth=8, size=(16, 16), seeds=SEEDS[:2],
+            cycles_seeds=SEEDS[:2])
+_SLAB_3X = ("Cycles 3.x's rough glass is another model (Fresnel at the shading normal, Smith "
+            "G1·G1): transmittance 0.5463 (unsampled) / 0.5632 (light-sampled) vs the core's 0.6313")
+_SLAB_OVERCOUNT = ("Cycles' light samples at a rough-glass vertex evaluate refraction configurations "
+                   "no microfacet produces (bsdf_microfacet_eval, 'TODO: check if the refraction "
+                   "configuration is valid'): transmittance 0.6506 light-sampled vs 0.6308 found by "
+                   "BSDF sampling only (+3.1 %); the core 0.6313")
+
+
+@pytest.mark.parametrize("light_sampled", [
+    pytest.param(False, marks=pytest.mark.xfail(V < (4, 0, 0), strict=True, reason=_SLAB_3X)),
+    pytest.param(True, marks=pytest.mark.xfail(strict=True, reason=_SLAB_OVERCOUNT if V >= (4, 0, 0) else _SLAB_3X)),
+], ids=["bsdf_sampled", "light_sampled"])
+def test_rough_slab_transmittance(tmp_path, light_sampled):
+    """The slab's transmittance: PATH against Cycles, which finds the emitter by BSDF sampling
+    only (``bsdf_sampled``) or also light-samples it (``light_sampled``, a Cycles gap: its
+    estimate changes with the sampling strategy)."""
+    rough_slab_scene(light_sampled)
+    tag = f"slab_{'light' if light_sampled else 'bsdf'}"
+    e, c = render_seeds(tmp_path, tag, "PATH", **SLAB)
+    result = compare(f"{tag}/PATH", e, c, block=4)
+    assert result.passed, result.summary()

@@ -426,7 +426,7 @@ class ImageComparison:
         return (f"means ours {np.round(self.mean_ours, 5)} ref {np.round(self.mean_ref, 5)} "
                 f"rel {np.round(rel, 4)}; block mean z² {self.mean_z2:.2f} "
                 f"(χ² per channel {np.round(self.chi2, 1)} over {self.blocks.tolist()} blocks, "
-                f"p {np.array2string(self.p_chi2, precision=2)}), max |z| "
+                f"p {' '.join(f'{p:.2g}' for p in self.p_chi2)}), max |z| "
                 f"{np.abs(self.z).max():.2f} (family p {self.p_max:.2g}), "
                 f"deff {np.round(self.deff, 2)}")
 

@@ -21,7 +21,7 @@ import pytest
 
 import blender_helpers as h
 import ercuts_core  # noqa: F401  (a missing core must fail these tests)
-from cycles_stats import INJECT, compare, render_seeds
+from cycles_stats import INJECT, SEEDS, compare, render_seeds
 
 pytestmark = pytest.mark.slow
 V = bpy.app.version
@@ -47,6 +47,15 @@ def mirror_scene(point_light: bool):
         h.light("POINT", location=(0, -0.5, 2.5), energy=300, shadow_soft_size=0)
 
 
+def glossy_floor_scene():
+    """The mirror scene with a glossy floor (white Glossy BSDF, GGX, roughness 0.1)."""
+    _scene()
+    floor = h.node_material("GlossyFloor", "ShaderNodeBsdfGlossy", Color=(1, 1, 1), Roughness=0.1)
+    _node(floor).distribution = "GGX"
+    h.plane("Floor", size=3, material=floor)
+    h.light("POINT", location=(0, -0.5, 2.5), energy=300, shadow_soft_size=0)
+
+
 def glass_sphere_scene():
     _scene()
     h.plane("Floor", size=8, material=h.diffuse("Floor", (0.8, 0.8, 0.8)))
@@ -55,8 +64,9 @@ def glass_sphere_scene():
 
 
 def _skip_on_3x(integrator):
-    if V < (4, 0, 0) and integrator == "BDPT":
-        pytest.skip("Blender 3.x: PATH and ERCUTS (CI time; the core renders are identical)")
+    if V < (4, 0, 0) and integrator == "ERCUTS":
+        pytest.skip("ERCUTS with bpy 5.x only (CI time; the core renders are identical, only "
+                    "Cycles differs, which PATH and BDPT compare)")
 
 
 @pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
@@ -66,6 +76,26 @@ def test_white_mirror_floor(tmp_path, integrator):
     tag = "mirror_lit" if integrator != "BDPT" else "mirror"
     e, c = render_seeds(tmp_path, tag, integrator, **GLASS)
     result = compare(f"{tag}/{integrator}", e, c)
+    assert result.passed, result.summary()
+
+
+# ERCUTS normalises each VPL by its image energy Ê1, estimated by tracing the VPL's cosine
+# emission one bounce to the camera (vpl.estimate_e1_light_tracing). Where the camera sees a
+# sharp glossy lobe that estimate is heavy-tailed: it is mostly too small, and 1/Ê1 too large.
+ERCUTS_SHARP_GLOSSY = pytest.mark.xfail(strict=True, reason=(
+    "ERCUTS's VPL normalisation 1/Ê1 blows up at sharp glossy receivers (one-bounce light-traced "
+    "Ê1 misses the lobe): glossy floor of roughness 0.1, indirect light ×26 (VPL image energy "
+    "24.4× P), image mean ×3–4; roughness 0.05: ×880; 0.2: ×2.3 (bpy 5.0.1, 64×48)"))
+
+
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", pytest.param("ERCUTS", marks=ERCUTS_SHARP_GLOSSY)])
+def test_white_glossy_floor(tmp_path, integrator):
+    """A white GGX floor of roughness 0.1 (the mirror scene, with the point light for all)."""
+    _skip_on_3x(integrator)
+    glossy_floor_scene()
+    seeds = dict(seeds=SEEDS[:2]) if integrator == "ERCUTS" else {}  # strict xfail, far off: CI time
+    e, c = render_seeds(tmp_path, "glossy_floor", integrator, **seeds, **GLASS)
+    result = compare(f"glossy_floor/{integrator}", e, c)
     assert result.passed, result.summary()
 
 
@@ -86,12 +116,13 @@ def _set(socket, value):
 
 @pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
 @pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
-def test_white_mirror_floor_detects_a_rough_mirror(tmp_path, integrator):
+def test_white_mirror_floor_detects_a_grey_mirror(tmp_path, integrator):
     mirror_scene(point_light=integrator != "BDPT")
     tag = "mirror_lit" if integrator != "BDPT" else "mirror"
-    roughness = _node(bpy.data.materials["Mirror"]).inputs["Roughness"]
-    e, c = render_seeds(tmp_path, tag, integrator, inject=lambda: _set(roughness, 0.05), **GLASS)
-    assert not compare(f"{tag}/{integrator}, mirror roughness 0.05 exported", e, c).passed
+    colour = _node(bpy.data.materials["Mirror"]).inputs["Color"]
+    e, c = render_seeds(tmp_path, tag, integrator, inject=lambda: _set(colour, (0.99, 0.99, 0.99, 1)),
+                        **GLASS)
+    assert not compare(f"{tag}/{integrator}, mirror colour 0.99 exported", e, c).passed
 
 
 @pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
@@ -99,5 +130,5 @@ def test_white_mirror_floor_detects_a_rough_mirror(tmp_path, integrator):
 def test_white_glass_sphere_detects_a_wrong_ior(tmp_path, integrator):
     glass_sphere_scene()
     ior = _node(bpy.data.materials["Glass"]).inputs["IOR"]
-    e, c = render_seeds(tmp_path, "glass", integrator, inject=lambda: _set(ior, 1.4), **GLASS)
-    assert not compare(f"glass/{integrator}, IOR 1.4 exported", e, c).passed
+    e, c = render_seeds(tmp_path, "glass", integrator, inject=lambda: _set(ior, 1.33), **GLASS)
+    assert not compare(f"glass/{integrator}, IOR 1.33 exported", e, c).passed

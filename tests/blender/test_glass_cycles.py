@@ -109,7 +109,10 @@ def test_white_glass_sphere(tmp_path, integrator):
 
 
 def _set(socket, value):
+    """Inject: set ``socket`` to ``value``; returns the undo (a copy of the old value: a colour
+    socket's default_value is a live view)."""
     old = socket.default_value
+    old = tuple(old) if hasattr(old, "__len__") else old
     socket.default_value = value
     return lambda: setattr(socket, "default_value", old)
 
@@ -117,6 +120,7 @@ def _set(socket, value):
 @pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
 @pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
 def test_white_mirror_floor_detects_a_grey_mirror(tmp_path, integrator):
+    _skip_on_3x(integrator)
     mirror_scene(point_light=integrator != "BDPT")
     tag = "mirror_lit" if integrator != "BDPT" else "mirror"
     colour = _node(bpy.data.materials["Mirror"]).inputs["Color"]
@@ -126,8 +130,19 @@ def test_white_mirror_floor_detects_a_grey_mirror(tmp_path, integrator):
 
 
 @pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT"])
+def test_white_glossy_floor_detects_a_wrong_roughness(tmp_path, integrator):
+    _skip_on_3x(integrator)
+    glossy_floor_scene()
+    roughness = _node(bpy.data.materials["GlossyFloor"]).inputs["Roughness"]
+    e, c = render_seeds(tmp_path, "glossy_floor", integrator, inject=lambda: _set(roughness, 0.13), **GLASS)
+    assert not compare(f"glossy_floor/{integrator}, roughness 0.13 exported", e, c).passed
+
+
+@pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
 @pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
 def test_white_glass_sphere_detects_a_wrong_ior(tmp_path, integrator):
+    _skip_on_3x(integrator)
     glass_sphere_scene()
     ior = _node(bpy.data.materials["Glass"]).inputs["IOR"]
     e, c = render_seeds(tmp_path, "glass", integrator, inject=lambda: _set(ior, 1.33), **GLASS)

@@ -386,3 +386,130 @@ def z_test_mean(samples: F64, expected: float | F64, axis: int = 0) -> F64:
     exact = diff <= 1e-12 * np.maximum(np.abs(mean), 1.0)
     z = np.divide(diff, se, out=np.full(np.shape(diff), np.inf), where=se > 0)
     return np.where(se > 0, erfc(z / np.sqrt(2.0)), np.where(exact, 1.0, 0.0))
+
+
+# ---------------------------------------------------------------------------------------
+# Two renderers, several seeds each: block means compared by their own noise
+# ---------------------------------------------------------------------------------------
+
+@dataclass
+class ImageComparison:
+    """Result of :func:`compare_images` (RGB channels; B blocks with noise).
+
+    Attributes:
+        z: (By, Bx, 3) normal-equivalent z-scores of the block-mean differences (0 where
+            both renderers are noise-free and equal, e.g. the background).
+        chi2: (3,) Σ z² per channel over its ``blocks``; ``blocks`` (3,) counts them.
+        p_chi2: (3,) upper tail of χ²(blocks) per channel.
+        p_max: family p-value of the largest |z| (Šidák over all block channels).
+        deff: (2,) variance inflation of (ours, ref) from correlated pixel noise (≥ 1).
+        mean_ours, mean_ref: (3,) image means.
+        passed: both statistics above the significance level.
+    """
+
+    z: F64
+    chi2: F64
+    blocks: NDArray[np.int64]
+    p_chi2: F64
+    p_max: float
+    deff: F64
+    mean_ours: F64
+    mean_ref: F64
+    passed: bool
+
+    @property
+    def mean_z2(self) -> float:
+        return float(self.chi2.sum() / max(int(self.blocks.sum()), 1))
+
+    def summary(self) -> str:
+        rel = self.mean_ours / np.where(self.mean_ref != 0, self.mean_ref, 1.0) - 1.0
+        return (f"means ours {np.round(self.mean_ours, 5)} ref {np.round(self.mean_ref, 5)} "
+                f"rel {np.round(rel, 4)}; block mean z² {self.mean_z2:.2f} "
+                f"(χ² per channel {np.round(self.chi2, 1)} over {self.blocks.tolist()} blocks, "
+                f"p {' '.join(f'{p:.2g}' for p in self.p_chi2)}), max |z| "
+                f"{np.abs(self.z).max():.2f} (family p {self.p_max:.2g}), "
+                f"deff {np.round(self.deff, 2)}")
+
+
+#: Relative difference of noise-free pixels that is float32 accumulation, not a disagreement:
+#: a render sums up to a few hundred float32 samples per pixel (256·2⁻²⁴ ≈ 1.5·10⁻⁵); Cycles'
+#: sky seen directly reads 0.59999925 for 0.6.
+FLOAT_RTOL = 2e-5
+
+
+def _block_moments(runs: list, block: int) -> tuple[F64, F64, F64, F64, float]:
+    """Block means (By, Bx, 3), their variance, its Satterthwaite degrees of freedom, and the
+    between-seed variance of single-seed block means, from S ≥ 2 renders (h, w, ≥ 3)."""
+    x = np.stack([np.asarray(r, np.float64)[..., :3] for r in runs])       # (S, h, w, 3)
+    S, hh, ww, _ = x.shape
+    x = x[:, :hh // block * block, :ww // block * block]
+    by, bx, n = hh // block, ww // block, block * block
+
+    def per_block(a):       # (..., h, w, 3) → (..., By, Bx, n, 3)
+        a = a.reshape(*a.shape[:-3], by, block, bx, block, 3)
+        return np.moveaxis(a, -4, -3).reshape(*a.shape[:-5], by, bx, n, 3)
+
+    s2 = per_block(x.var(axis=0, ddof=1))                     # per-pixel sample variance
+    mean = per_block(x.mean(axis=0)).mean(axis=-2)
+    var = s2.sum(axis=-2) / (n * n * S)                      # variance of the block mean
+    s2sum = s2.sum(axis=-2)
+    dof = np.divide(s2sum ** 2, (s2 ** 2).sum(axis=-2) / (S - 1),
+                    out=np.full(mean.shape, np.inf), where=s2sum > 0)
+    between = per_block(x).mean(axis=-2).var(axis=0, ddof=1)  # (By, Bx, 3)
+    return mean, var, dof, between, S
+
+
+def compare_images(ours: list, ref: list, block: int = 8, significance: float = 1e-3) -> ImageComparison:
+    """Do two renderers agree in expectation? Block means with z-scores from the renders' noise.
+
+    Each list holds S ≥ 2 renders (h, w, ≥ 3) of the same scene with different seeds.
+    Per block of ``block``×``block`` pixels and channel:
+
+    1. the mean over seeds and pixels, and the variance of that mean from the per-pixel
+       sample variances over the seeds (Σ s²/(n²S)) with Satterthwaite's degrees of freedom
+       (a block whose variance comes from a few noisy pixels counts as a poor estimate);
+    2. correlated noise (one VPL set lights many pixels in ERCUTS) makes the per-pixel
+       formula too small: the seeds' own block means tell by how much. The inflation
+       deff = Σ_blocks between-seed variance of a single seed's block mean / Σ S·var is
+       pooled over all blocks and applied when it exceeds 1 (≈ 1 for pixel-independent
+       estimators: PATH, BDPT, Cycles);
+    3. Welch's t of the difference of the two renderers' block means, turned into the
+       normal z with the same tail probability (Student's t with the combined
+       Satterthwaite degrees of freedom).
+
+    Blocks where both renderers are noise-free (a background, the sky in a perfect mirror)
+    are left out when they agree to float32 accumulation (relative :data:`FLOAT_RTOL`) and
+    count as infinitely far apart otherwise. The renderers agree when, for
+    each channel, Σ z² over its blocks is within the χ²(blocks) tail and the largest |z|
+    of all block channels within its Šidák-corrected normal tail, each at
+    ``significance``/2 (the channel χ² tests Bonferroni-corrected over the three channels).
+    Nothing else is tuned: the tolerance is the noise of the renders themselves.
+    """
+    from scipy.stats import chi2 as chi2_dist, norm, t as t_dist
+
+    mo, vo, do, bo, so = _block_moments(ours, block)
+    mr, vr, dr, br, sr = _block_moments(ref, block)
+    deff = np.array([max(1.0, float(b.sum() / max(s * v.sum(), 1e-300)))
+                     for b, v, s in ((bo, vo, so), (br, vr, sr))])
+    vo, vr = vo * deff[0], vr * deff[1]
+    diff, var = mo - mr, vo + vr
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dof = var ** 2 / (np.where(np.isfinite(do), vo ** 2 / do, 0.0)
+                          + np.where(np.isfinite(dr), vr ** 2 / dr, 0.0))
+    noisy = var > 0
+    z = np.zeros(diff.shape)
+    t = np.divide(diff, np.sqrt(var), out=np.zeros(diff.shape), where=noisy)
+    z[noisy] = np.sign(t[noisy]) * norm.isf(t_dist.sf(np.abs(t[noisy]), np.maximum(dof[noisy], 1.0)))
+    off = ~noisy & (np.abs(diff) > FLOAT_RTOL * np.maximum(np.abs(mo), np.abs(mr)) + 1e-12)
+    z[off] = np.inf
+    counted = noisy | off
+    blocks = counted.reshape(-1, 3).sum(axis=0)
+    chi2 = (z ** 2).reshape(-1, 3).sum(axis=0)
+    p_chi2 = np.array([chi2_dist.sf(c, k) if k > 0 else 1.0 for c, k in zip(chi2, blocks)])
+    zmax = float(np.abs(z).max()) if counted.any() else 0.0
+    m = max(int(blocks.sum()), 1)
+    p_max = float(-np.expm1(m * np.log1p(-min(2.0 * norm.sf(zmax), 1.0)))) if np.isfinite(zmax) else 0.0
+    passed = bool(p_chi2.min() >= significance / 6.0 and p_max >= significance / 2.0)
+    mean_o = np.mean([np.asarray(r, np.float64)[..., :3].mean(axis=(0, 1)) for r in ours], axis=0)
+    mean_r = np.mean([np.asarray(r, np.float64)[..., :3].mean(axis=(0, 1)) for r in ref], axis=0)
+    return ImageComparison(z, chi2, blocks, p_chi2, p_max, deff, mean_o, mean_r, passed)

@@ -1,44 +1,36 @@
 """Glass and mirrors against Cycles, rendered by the same Blender (issue 15, exporter side):
 a white perfect mirror (Glossy BSDF, roughness 0) and a white smooth glass sphere (Glass
 BSDF, IOR 1.45) on a diffuse floor, where the exporter's mapping is exact (see
-``addon/export/shaders.py``); uniform world light (and a point light for PATH). Cycles as in
-``test_cycles_agreement.py``, plus Filter Glossy 0: Cycles' default (1.0) roughens glossy
-and glass closures after a diffuse bounce, which renders the floor under the ball 8.8 %
-darker (measured, PATH and BDPT alike) — the core has no such filter.
+``addon/export/shaders.py``); uniform world light (and a point light for the mirror).
+PATH, BDPT and ERCUTS each against Cycles, four seeds per engine, compared block by block
+(``cycles_stats``: 8×8-pixel block means, z-scores from the renders' own variance, χ² per
+channel and Šidák on the largest |z|, family level 10⁻³).
+
+Cycles as in ``test_cycles_agreement.py``, plus Filter Glossy 0: Cycles' default (1.0)
+roughens glossy and glass closures after a diffuse bounce, which renders the floor under
+the ball 8.8 % darker (measured, PATH and BDPT alike) — the core has no such filter.
+
+The mirror's point light is left out for BDPT: its light paths also reach the box via the
+mirror (a caustic of the point light, 1.8 % of the red), which path tracers cannot sample —
+Cycles, PATH, and ERCUTS, which path-traces every path through a mirror or smooth glass.
+ERCUTS runs with bpy 5.x only (its renders are bit-identical in both Blenders; PATH and BDPT
+compare Blender 3.4.1's Cycles). Measured numbers (seeds 1–4; "rel" = Ercuts / Cycles − 1 of
+the image means in R, G, B) and those of a wrong parameter exported on purpose
+(``ERCUTS_INJECT_ERROR=1``) are in each test's docstring. Before (one seed, the image means
+within a hand-set 1 %) these were PATH and BDPT within 0.2 %.
 """
 from __future__ import annotations
 
 import bpy
-import numpy as np
 import pytest
 
 import blender_helpers as h
 import ercuts_core  # noqa: F401  (a missing core must fail these tests)
-import test_cycles_agreement as agreement
+from cycles_stats import INJECT, SEEDS, compare, render_seeds
 
-W, H = agreement.W, agreement.H
-
-
-def _render_both(tmp_path, integrator, tag, samples=128, cycles_samples=512, max_depth=8):
-    s = bpy.context.scene
-    s.render.resolution_x, s.render.resolution_y = W, H
-    s.render.resolution_percentage = 100
-    s.ercuts.samples, s.ercuts.integrator, s.ercuts.max_depth = samples, integrator, max_depth
-    s.ercuts.rough_samples = samples
-    s.ercuts.seed = 0
-    s.render.engine = "ERCUTS"
-    ercuts = h.render_exr(tmp_path / f"{tag}_ercuts.exr")
-    agreement._cycles(s, max_depth, cycles_samples, 0)
-    s.cycles.blur_glossy = 0.0
-    s.render.engine = "CYCLES"
-    cycles = h.render_exr(tmp_path / f"{tag}_cycles.exr")
-    return ercuts, cycles
-
-
-def _assert_agree(e, c, rtol):
-    agreement.assert_means_agree(e, c, rtol=rtol)
-    bottom = np.s_[H * 2 // 3:, :]   # rows first: the floor in front of / under the object
-    agreement.assert_means_agree(e[bottom], c[bottom], rtol=2 * rtol)
+pytestmark = pytest.mark.slow
+V = bpy.app.version
+GLASS = dict(samples=32, cycles_samples=128, max_depth=6)
 
 
 def _scene():
@@ -48,26 +40,134 @@ def _scene():
           material=h.diffuse("Box", (0.8, 0.45, 0.2)))
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("integrator", ["PATH", "BDPT"])
-def test_white_mirror_floor(tmp_path, integrator):
+def _node(mat):
+    return next(n for n in mat.node_tree.nodes if n.type != "OUTPUT_MATERIAL")
+
+
+def mirror_scene(point_light: bool):
     _scene()
     mirror = h.node_material("Mirror", "ShaderNodeBsdfGlossy", Color=(1, 1, 1), Roughness=0.0)
     h.plane("Floor", size=3, material=mirror)
-    if integrator == "PATH":
-        # BDPT's light paths also reach the box via the mirror (a caustic of the point
-        # light, 1.8 % of the red), which path tracers (PATH, Cycles) cannot sample
+    if point_light:
         h.light("POINT", location=(0, -0.5, 2.5), energy=300, shadow_soft_size=0)
-    e, c = _render_both(tmp_path, integrator, "mirror")
-    _assert_agree(e, c, rtol=0.01)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("integrator", ["PATH", "BDPT"])
-def test_white_glass_sphere(tmp_path, integrator):
+def glossy_floor_scene():
+    """The mirror scene with a glossy floor (white Glossy BSDF, GGX, roughness 0.1)."""
+    _scene()
+    floor = h.node_material("GlossyFloor", "ShaderNodeBsdfGlossy", Color=(1, 1, 1), Roughness=0.1)
+    _node(floor).distribution = "GGX"
+    h.plane("Floor", size=3, material=floor)
+    h.light("POINT", location=(0, -0.5, 2.5), energy=300, shadow_soft_size=0)
+
+
+def glass_sphere_scene():
     _scene()
     h.plane("Floor", size=8, material=h.diffuse("Floor", (0.8, 0.8, 0.8)))
     glass = h.node_material("Glass", "ShaderNodeBsdfGlass", Color=(1, 1, 1), Roughness=0.0, IOR=1.45)
     h.uv_sphere("Ball", radius=0.7, location=(-0.3, 0, 0.7), material=glass)
-    e, c = _render_both(tmp_path, integrator, "glass")
-    _assert_agree(e, c, rtol=0.01)
+
+
+def _skip_on_3x(integrator):
+    if V < (4, 0, 0) and integrator == "ERCUTS":
+        pytest.skip("ERCUTS with bpy 5.x only (CI time; the core renders are identical, only "
+                    "Cycles differs, which PATH and BDPT compare)")
+
+
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
+def test_white_mirror_floor(tmp_path, integrator):
+    """bpy 5.0.1: PATH rel −0.05/−0.02/−0.00 %, block mean z² 0.78, max |z| 2.03; BDPT
+    −0.01/−0.00/+0.00 %, 1.06, 2.55; ERCUTS +0.03/+0.01/+0.00 %, 1.05, 2.86. Blender 3.4.1:
+    PATH 0.74, 2.03; BDPT 1.17, 2.57. Mirror colour 0.99 exported: every engine and Blender
+    fails (the noise-free mirrored sky 1 % off: z = ∞); a colour 0.99 in *both* renderers
+    fails too (z² 407: the core's metal rises to white at grazing angles, Cycles' Glossy does
+    not — the documented gap for non-white Glossy)."""
+    _skip_on_3x(integrator)
+    mirror_scene(point_light=integrator != "BDPT")
+    tag = "mirror_lit" if integrator != "BDPT" else "mirror"
+    e, c = render_seeds(tmp_path, tag, integrator, **GLASS)
+    result = compare(f"{tag}/{integrator}", e, c)
+    assert result.passed, result.summary()
+
+
+# ERCUTS normalises each VPL by its image energy Ê1, estimated by tracing the VPL's cosine
+# emission one bounce to the camera (vpl.estimate_e1_light_tracing). Where the camera sees a
+# sharp glossy lobe that estimate is heavy-tailed: it is mostly too small, and 1/Ê1 too large
+# (the pilot's Jensen correction cannot see a lobe it never hits). Measured on this floor
+# (core, 64×48, seed 1): VPL image energy 24.4× P at e1_samples 256, 1.93× at 4096; with
+# normalize_to_p the indirect light is within 7 % of PATH's.
+ERCUTS_SHARP_GLOSSY = pytest.mark.xfail(strict=True, reason=(
+    "ERCUTS's VPL normalisation 1/Ê1 blows up at sharp glossy receivers (one-bounce light-traced "
+    "Ê1 misses the lobe): glossy floor of roughness 0.1, indirect light ×26 (VPL image energy "
+    "24.4× P), image mean ×3–4; roughness 0.05: ×880; 0.2: ×2.3 (bpy 5.0.1, 64×48)"))
+
+
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", pytest.param("ERCUTS", marks=ERCUTS_SHARP_GLOSSY)])
+def test_white_glossy_floor(tmp_path, integrator):
+    """A white GGX floor of roughness 0.1 (the mirror scene, with the point light for all).
+    bpy 5.0.1: PATH rel +0.39/+0.21/+0.07 %, z² 1.05, max |z| 2.47; BDPT +0.59/+0.32/+0.12 %,
+    1.10, 2.80; ERCUTS (xfail, 2 seeds) +322/+193/+86 %, 3.51 (χ² p 6·10⁻¹⁷), 4.88. Blender
+    3.4.1: PATH 0.92, 2.54; BDPT 0.94, 2.61. Roughness 0.13 exported: PATH z² 3.24, max |z|
+    6.99 (3.4.1: 2.42, 6.94); BDPT 3.88, 6.60 (3.4.1: 2.98, 6.55) (fail)."""
+    _skip_on_3x(integrator)
+    glossy_floor_scene()
+    seeds = dict(seeds=SEEDS[:2]) if integrator == "ERCUTS" else {}  # strict xfail, far off: CI time
+    e, c = render_seeds(tmp_path, "glossy_floor", integrator, **seeds, **GLASS)
+    result = compare(f"glossy_floor/{integrator}", e, c)
+    assert result.passed, result.summary()
+
+
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
+def test_white_glass_sphere(tmp_path, integrator):
+    """bpy 5.0.1: PATH rel −0.10/−0.11/−0.11 %, z² 0.80, max |z| 1.97; BDPT −0.08 %, 0.76,
+    2.01; ERCUTS −0.05/−0.10/−0.13 %, 0.77, 2.41 (its correlated noise inflates the block
+    variance 2.4×). Blender 3.4.1: PATH 0.84, 2.51; BDPT 0.75, 2.01. IOR 1.33 exported: PATH
+    z² 7.23, max |z| 10.7 (3.4.1: 7.35); BDPT 7.27, 10.9 (3.4.1: 7.25); ERCUTS 4.28, 8.04
+    (fail). The resolution: IOR 1.40 (−0.2 % in the mean) fails BDPT (z² 2.35) and ERCUTS
+    (2.67) but not PATH (1.75, χ² p 10⁻³ against the 1.7·10⁻⁴ level)."""
+    _skip_on_3x(integrator)
+    glass_sphere_scene()
+    e, c = render_seeds(tmp_path, "glass", integrator, **GLASS)
+    result = compare(f"glass/{integrator}", e, c)
+    assert result.passed, result.summary()
+
+
+def _set(socket, value):
+    """Inject: set ``socket`` to ``value``; returns the undo (a copy of the old value: a colour
+    socket's default_value is a live view)."""
+    old = socket.default_value
+    old = tuple(old) if hasattr(old, "__len__") else old
+    socket.default_value = value
+    return lambda: setattr(socket, "default_value", old)
+
+
+@pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
+def test_white_mirror_floor_detects_a_grey_mirror(tmp_path, integrator):
+    _skip_on_3x(integrator)
+    mirror_scene(point_light=integrator != "BDPT")
+    tag = "mirror_lit" if integrator != "BDPT" else "mirror"
+    colour = _node(bpy.data.materials["Mirror"]).inputs["Color"]
+    e, c = render_seeds(tmp_path, tag, integrator, inject=lambda: _set(colour, (0.99, 0.99, 0.99, 1)),
+                        **GLASS)
+    assert not compare(f"{tag}/{integrator}, mirror colour 0.99 exported", e, c).passed
+
+
+@pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT"])
+def test_white_glossy_floor_detects_a_wrong_roughness(tmp_path, integrator):
+    _skip_on_3x(integrator)
+    glossy_floor_scene()
+    roughness = _node(bpy.data.materials["GlossyFloor"]).inputs["Roughness"]
+    e, c = render_seeds(tmp_path, "glossy_floor", integrator, inject=lambda: _set(roughness, 0.13), **GLASS)
+    assert not compare(f"glossy_floor/{integrator}, roughness 0.13 exported", e, c).passed
+
+
+@pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
+def test_white_glass_sphere_detects_a_wrong_ior(tmp_path, integrator):
+    _skip_on_3x(integrator)
+    glass_sphere_scene()
+    ior = _node(bpy.data.materials["Glass"]).inputs["IOR"]
+    e, c = render_seeds(tmp_path, "glass", integrator, inject=lambda: _set(ior, 1.33), **GLASS)
+    assert not compare(f"glass/{integrator}, IOR 1.33 exported", e, c).passed

@@ -1,0 +1,319 @@
+"""Rough glass and glossy lobes against Cycles in the same Blender (issue 15, tests).
+
+Three scenes, each rendered by PATH, BDPT and ERCUTS and by Cycles over four seeds, compared
+block by block (``cycles_stats``, ``stats.compare_images``: 8×8-pixel block means, z-scores
+from the renders' own variance, χ² over the blocks per channel and Šidák on the largest |z|,
+family level 10⁻³; nothing is tuned to the scenes):
+
+* a rough glass sphere (Glass BSDF, GGX, roughness 0.3, IOR 1.5) on a floor, lit by a 3 m
+  emissive panel above;
+* Veach's glossy sweep: five white Glossy plates (GGX) of roughness 0, 0.15, 0.3, 0.55 and 1
+  reflecting four sphere lights (point lights of radius 0.02, 0.08, 0.2 and 0.4 m);
+* a lamp behind frosted glass: an emissive bulb behind a rough glass pane (roughness 0.6)
+  lights a floor, a wall and a block in front of the pane;
+
+and the transmittance of a rough slab, which pins the two Cycles gaps below. Each test's
+docstring has its measured numbers (bpy 5.0.1 and Blender 3.4.1, seeds 1–4; "rel" = Ercuts /
+Cycles − 1 of the image means in R, G, B) and those of a wrong parameter exported on purpose
+(``ERCUTS_INJECT_ERROR=1`` runs those tests). On seeds 5–8 and 9–12 (``ERCUTS_TEST_SEEDS``)
+the passing cases gave block mean z² 0.67–1.54, the smallest channel p 0.0019 (the level is
+1.7·10⁻⁴).
+
+What is compared, and why the scenes look as they do:
+
+* Cycles' Glass and Glossy are set to 'GGX' (Blender ≥ 4.0 defaults to Multiscatter GGX,
+  3.x Glass to Beckmann; the core has single-scattering GGX) and white (Cycles' Glossy has no
+  Fresnel — the core's metal rises to white at grazing angles, exact for white only — and
+  Cycles tints a glass's reflection too), Filter Glossy 0, caustics on.
+* The lights of the glass scenes are emissive meshes that Cycles does not light-sample
+  (``cycles_stats.unsampled_emission``). Cycles evaluates its rough-glass BSDF also for
+  refraction configurations that no microfacet produces (``bsdf_microfacet_eval``: "TODO:
+  check if the refraction configuration is valid"; 3.4's ``eval_transmit`` has no check
+  either), so its *light samples* taken at a rough-glass vertex add light that its BSDF
+  samples never find: Cycles' estimate depends on its sampling strategy
+  (``test_rough_slab_transmittance``: +3.3 % with light sampling; transcribing the eval,
+  the transmitted albedo at normal incidence is 0.975 instead of 0.948 and 1.006 at
+  cos θ = 0.4). The comparison uses the strategy without that term; the core's eval and
+  sampling agree with it.
+* Rough glass is compared in Blender ≥ 4.0 only: Cycles 3.x's rough glass is another model
+  (Fresnel at the shading normal instead of the microfacet's, separable Smith G1·G1); the
+  slab transmits 13 % less there. The glossy sweep runs in both Blenders (PATH in 3.4.1):
+  3.x's separable G darkens the roughness-1 plate by 0.4 % (256 spp, 4 seeds), which these
+  sample counts do not resolve.
+* Light sources with a size are hidden from the camera (Blender's default). The core reaches
+  them from glossy surfaces by next-event estimation only (README), whose samples are
+  heavy-tailed on near-mirror lobes under large lights: a plate of roughness 0.05 under the
+  0.4 m light had single-seed block errors of 100 % at 32 spp and failed the comparison
+  spuriously, so the sharpest rough plate is 0.15 (next to the perfect mirror, 0).
+* No floor under the glossy plates: ERCUTS's VPLs are Lambertian at a glossy x2 (README, known
+  limitations); a dark floor under the plates rendered 3–5 % too bright (8×8 blocks at
+  3–9σ) in an earlier layout.
+"""
+from __future__ import annotations
+
+import math
+
+import bpy
+import pytest
+from mathutils import Vector
+
+import blender_helpers as h
+import ercuts_core  # noqa: F401  (a missing core must fail these tests)
+from cycles_stats import INJECT, SEEDS, compare, render_seeds, unsampled_emission
+
+V = bpy.app.version
+pytestmark = pytest.mark.slow
+
+# ERCUTS does not gather VPL light that reaches a rough-glass shading point from behind its
+# surface: ercuts_core/integrators/ercuts/gather.py builds its ShadingPoints without
+# ``transmissive``, so the lightcuts' receiver cosine is max(0, n·ω) there and a VPL inside
+# the sphere (or behind the pane) contributes 0, while the VPLs' normalisation Ê1 (light
+# traced) counts that light. Flagging rough-glass points transmissive (one line, tried outside
+# the repository) makes them bright but then too bright (+12–21 % sphere, +11 % pane with
+# these settings; +14–26 % indirect at e1_samples 256, within 2 % at 4096): the 1/Ê1 blow-up
+# of test_glass_cycles.ERCUTS_SHARP_GLOSSY, at transmitting receivers.
+ERCUTS_ROUGH_GLASS = pytest.mark.xfail(strict=True, reason=(
+    "ERCUTS's gather drops VPL light reaching rough glass from behind its surface (gather.py: "
+    "ShadingPoints without transmissive): the glass renders dark — sphere block mean z² 15.4, "
+    "max |z| 16.5; frosted pane image mean −67 %, z² 26.5 (bpy 5.0.1)"))
+
+
+#: ERCUTS, a strict xfail in the rough-glass scenes, renders two seeds with shorter phases
+#: (CI time): it misses by 20σ and more either way.
+ERCUTS_XFAIL = dict(seeds=SEEDS[:2], ercuts_settings=dict(
+    rough_samples=8, direct_samples=16, chain_length=50, stochastic_passes=4, e1_samples=128))
+
+
+def _extra(integrator):
+    return ERCUTS_XFAIL if integrator == "ERCUTS" else {}
+
+
+def _skip_rough_glass_on_3x():
+    if V < (4, 0, 0):
+        pytest.skip("Cycles 3.x's rough glass is another model (Fresnel at the shading normal, "
+                    "Smith G1·G1): slab transmittance 0.5463 vs 0.6313 at 45° (module docstring)")
+
+
+def _node(mat):
+    return next(n for n in mat.node_tree.nodes if n.type != "OUTPUT_MATERIAL")
+
+
+def _glass(name: str, roughness: float, ior: float = 1.5):
+    mat = h.node_material(name, "ShaderNodeBsdfGlass", Color=(1, 1, 1), Roughness=roughness, IOR=ior)
+    _node(mat).distribution = "GGX"
+    return mat
+
+
+def _glossy(name: str, roughness: float):
+    mat = h.node_material(name, "ShaderNodeBsdfGlossy", Color=(1, 1, 1), Roughness=roughness)
+    _node(mat).distribution = "GGX"
+    return mat
+
+
+def _set_input(mat, socket: str, value):
+    """Inject: set ``socket`` of the material's shader to ``value``; returns the undo."""
+    node = _node(mat)
+    old = node.inputs[socket].default_value
+    old = tuple(old) if hasattr(old, "__len__") else old      # a colour is a live view
+    node.inputs[socket].default_value = value
+    return lambda: setattr(node.inputs[socket], "default_value", old)
+
+
+# --------------------------------------------------------------------------- rough glass sphere
+
+def rough_sphere_scene():
+    """Rough glass sphere on a grey floor, an orange box behind it, a 3 m emissive panel."""
+    h.camera(location=(0, -3.2, 1.6), target=(0, 0, 0.45))
+    h.plane("Floor", size=8, material=h.diffuse("Floor", (0.8, 0.8, 0.8)))
+    h.box("Back", size=(0.6, 0.3, 1.2), location=(0.25, 1.0, 0.6),
+          material=h.diffuse("Back", (0.8, 0.3, 0.1)))
+    h.uv_sphere("Ball", radius=0.5, location=(0, 0, 0.5), material=_glass("RoughGlass", 0.3))
+    panel = h.plane("Panel", size=3.0, location=(-0.6, -0.4, 2.6),
+                    material=unsampled_emission("Panel", strength=2.0))
+    panel.rotation_euler = (math.pi, 0, 0)       # facing down (emission is two-sided anyway)
+
+
+SPHERE = dict(samples=32, cycles_samples=128, max_depth=5)
+
+
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", pytest.param("ERCUTS", marks=ERCUTS_ROUGH_GLASS)])
+def test_rough_glass_sphere_agrees_with_cycles(tmp_path, integrator):
+    """bpy 5.0.1: PATH rel −0.19/−0.18/−0.17 %, block mean z² 0.76, max |z| 1.79; BDPT
+    −0.20/−0.21/−0.22 %, 0.95, 2.84; ERCUTS (xfail, 2 seeds) +0.2/+2.1/+2.9 %, 15.4, 16.5.
+    IOR 1.4 exported: PATH z² 8.19, max |z| 11.5; BDPT 7.99, 11.7 (fail)."""
+    _skip_rough_glass_on_3x()
+    rough_sphere_scene()
+    e, c = render_seeds(tmp_path, "rough_sphere", integrator, **_extra(integrator), **SPHERE)
+    result = compare(f"rough_sphere/{integrator}", e, c)
+    assert result.passed, result.summary()
+
+
+@pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT"])
+def test_rough_glass_sphere_detects_a_wrong_ior(tmp_path, integrator):
+    _skip_rough_glass_on_3x()
+    rough_sphere_scene()
+    mat = bpy.data.materials["RoughGlass"]
+    e, c = render_seeds(tmp_path, "rough_sphere", integrator,
+                        inject=lambda: _set_input(mat, "IOR", 1.4), **SPHERE)
+    assert not compare(f"rough_sphere/{integrator}, IOR 1.4 exported", e, c).passed
+
+
+# --------------------------------------------------------------------------- glossy sweep (Veach)
+
+SWEEP_ROUGHNESS = (0.0, 0.15, 0.3, 0.55, 1.0)
+SWEEP_RADII = (0.02, 0.08, 0.2, 0.4)
+
+
+def glossy_sweep_scene():
+    """Veach's multiple-importance test scene: glossy plates of increasing roughness (front to
+    back), each turned to reflect a row of four sphere lights of increasing radius toward
+    the camera; a dark back wall, black world."""
+    cam = Vector((0, -2.6, 1.25))
+    h.camera(location=cam, target=(0, 0.25, 0.62), lens=35)
+    lights = Vector((0, -0.8, 2.6))
+    colours = [(1, 0.4, 0.3), (1, 0.9, 0.3), (0.4, 1, 0.4), (0.4, 0.6, 1)]
+    for i, (radius, colour) in enumerate(zip(SWEEP_RADII, colours)):
+        ob = h.light("POINT", location=(-0.75 + 0.5 * i, lights.y, lights.z), energy=30,
+                     color=colour, shadow_soft_size=radius, name=f"Sphere{i}")
+        ob.visible_camera = False
+    n = len(SWEEP_ROUGHNESS)
+    for i, roughness in enumerate(SWEEP_ROUGHNESS):
+        t = i / (n - 1)
+        c = Vector((0, -0.35 + 0.75 * t, 0.15 + 0.85 * t))
+        normal = ((cam - c).normalized() + (lights - c).normalized()).normalized()
+        plate = h.plane(f"Plate{i}", size=1.0, location=c, material=_glossy(f"Glossy{i}", roughness))
+        plate.scale = (2.2, 0.32, 1.0)
+        plate.rotation_euler = normal.to_track_quat("Z", "Y").to_euler()
+    wall = h.plane("Wall", size=6, location=(0, 2.6, 1.5), material=h.diffuse("Wall", (0.2, 0.2, 0.2)))
+    wall.rotation_euler = (math.pi / 2, 0, 0)
+
+
+SWEEP = dict(samples=32, cycles_samples=64, max_depth=2)
+
+
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
+def test_glossy_sweep_agrees_with_cycles(tmp_path, integrator):
+    """bpy 5.0.1: PATH rel −3.1/−1.6/−1.9 %, z² 1.14, max |z| 2.77; BDPT +0.2/+0.6/−1.5 %,
+    1.14, 2.77; ERCUTS −2.5/−1.7/−2.3 %, 1.20, 3.01 (the means move by a few % between seeds:
+    the highlights' noise). Blender 3.4.1: PATH −4.1/−2.0/−2.4 %, 1.25, 2.75.
+    The roughness-0.55 plate exported as 0.45: PATH z² 9.25, max |z| 11.3 (3.4.1: 9.57,
+    11.4); BDPT 13.0, 14.8; ERCUTS 10.6, 12.4 (fail)."""
+    if V < (4, 0, 0) and integrator != "PATH":
+        pytest.skip("Blender 3.x: PATH only (CI time; the core renders are identical)")
+    glossy_sweep_scene()
+    e, c = render_seeds(tmp_path, "glossy_sweep", integrator, **SWEEP)
+    result = compare(f"glossy_sweep/{integrator}", e, c)
+    assert result.passed, result.summary()
+
+
+@pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
+def test_glossy_sweep_detects_a_wrong_roughness(tmp_path, integrator):
+    if V < (4, 0, 0) and integrator != "PATH":
+        pytest.skip("Blender 3.x: PATH only")
+    glossy_sweep_scene()
+    mat = bpy.data.materials["Glossy3"]
+    e, c = render_seeds(tmp_path, "glossy_sweep", integrator,
+                        inject=lambda: _set_input(mat, "Roughness", 0.45), **SWEEP)
+    assert not compare(f"glossy_sweep/{integrator}, plate 0.55 exported as 0.45", e, c).passed
+
+
+# --------------------------------------------------------------------------- lamp behind frosted glass
+
+def frosted_lamp_scene():
+    """A bulb behind a frosted pane (rough glass slab, roughness 0.6) lights a floor, a wall
+    and a blue block in front of the pane through it; seen at an angle."""
+    h.camera(location=(1.6, -3.0, 1.5), target=(0.0, 0.3, 0.45), lens=35)
+    h.plane("Floor", size=6, material=h.diffuse("Floor", (0.8, 0.8, 0.8)))
+    wall = h.plane("Wall", size=6, location=(0, 2.0, 1.5), material=h.diffuse("Wall", (0.6, 0.6, 0.5)))
+    wall.rotation_euler = (math.pi / 2, 0, 0)
+    h.box("Pane", size=(1.4, 0.05, 1.1), location=(0, 0.5, 0.6), material=_glass("Frosted", 0.6))
+    h.uv_sphere("Bulb", radius=0.15, location=(0, 0.85, 0.7),
+                material=unsampled_emission("Bulb", (1.0, 0.9, 0.75), 40.0))
+    h.box("Block", size=(0.3, 0.3, 0.3), location=(-0.3, -0.2, 0.15),
+          material=h.diffuse("Block", (0.2, 0.4, 0.8)))
+
+
+FROSTED = dict(samples=32, cycles_samples=128, max_depth=5)
+#: BDPT: half the samples (three times PATH's cost per sample, less noise through the pane)
+FROSTED_BDPT_SAMPLES = 16
+
+
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", pytest.param("ERCUTS", marks=ERCUTS_ROUGH_GLASS)])
+def test_lamp_behind_frosted_glass_agrees_with_cycles(tmp_path, integrator):
+    """bpy 5.0.1: PATH rel −0.7/−0.7/−0.9 %, z² 0.77, max |z| 3.98; BDPT (16 spp)
+    +0.3/+0.4/+0.3 %, 0.66, 2.35; ERCUTS (xfail, 2 seeds) −67/−67/−69 %, 26.5, 21.2.
+    Roughness 0.5 exported: PATH +10 %, z² 2.08, max |z| 6.94; BDPT +9 %, 2.44, 5.69 (fail)."""
+    _skip_rough_glass_on_3x()
+    frosted_lamp_scene()
+    settings = dict(FROSTED, samples=FROSTED_BDPT_SAMPLES) if integrator == "BDPT" else FROSTED
+    e, c = render_seeds(tmp_path, "frosted_lamp", integrator, **_extra(integrator), **settings)
+    result = compare(f"frosted_lamp/{integrator}", e, c)
+    assert result.passed, result.summary()
+
+
+@pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT"])
+def test_lamp_behind_frosted_glass_detects_a_wrong_roughness(tmp_path, integrator):
+    _skip_rough_glass_on_3x()
+    frosted_lamp_scene()
+    mat = bpy.data.materials["Frosted"]
+    settings = dict(FROSTED, samples=FROSTED_BDPT_SAMPLES) if integrator == "BDPT" else FROSTED
+    e, c = render_seeds(tmp_path, "frosted_lamp", integrator,
+                        inject=lambda: _set_input(mat, "Roughness", 0.5), **settings)
+    assert not compare(f"frosted_lamp/{integrator}, roughness 0.5 exported", e, c).passed
+
+
+# --------------------------------------------------------------------------- rough slab transmittance
+
+def rough_slab_scene(light_sampled: bool):
+    """An orthographic camera looks down through a rough glass slab (roughness 0.6, IOR 1.5,
+    5 cm thick, tilted 45°) at a uniform emitter filling the lower hemisphere; black world:
+    every pixel is the slab's directional transmittance (internal reflections included)."""
+    cam = h.camera(location=(0, 0, 5), target=(0, 0, 0))
+    cam.data.type, cam.data.ortho_scale = "ORTHO", 0.5
+    slab = h.box("Slab", size=(4, 4, 0.05), material=_glass("Slab", 0.6))
+    slab.rotation_euler = (math.radians(45), 0, 0)
+    emitter = h.emission("Below", (1, 1, 1), 1.0) if light_sampled else unsampled_emission("Below")
+    h.plane("Below", size=200, location=(0, 0, -1), material=emitter)
+
+
+SLAB = dict(samples=128, cycles_samples=512, max_depth=8, size=(16, 16), seeds=SEEDS[:2],
+            cycles_seeds=SEEDS[:2])
+_SLAB_3X = ("Cycles 3.x's rough glass is another model (Fresnel at the shading normal, Smith "
+            "G1·G1): transmittance 0.5459 (BSDF-sampled) / 0.5628 (light-sampled) vs the core's "
+            "0.6293; block mean z² 20.0 / 16.9")
+_SLAB_OVERCOUNT = ("Cycles' light samples at a rough-glass vertex evaluate refraction configurations "
+                   "no microfacet produces (bsdf_microfacet_eval, 'TODO: check if the refraction "
+                   "configuration is valid'): transmittance 0.6496 light-sampled vs 0.6287 found by "
+                   "BSDF sampling only (+3.3 %); the core 0.6293 (z² 4.56, χ² p 3·10⁻⁹)")
+
+
+@pytest.mark.parametrize("light_sampled", [
+    pytest.param(False, marks=pytest.mark.xfail(V < (4, 0, 0), strict=True, reason=_SLAB_3X)),
+    pytest.param(True, marks=pytest.mark.xfail(
+        strict=True, reason=_SLAB_OVERCOUNT if V >= (4, 0, 0) else _SLAB_3X)),
+], ids=["bsdf_sampled", "light_sampled"])
+def test_rough_slab_transmittance(tmp_path, light_sampled):
+    """The slab's transmittance: PATH against Cycles, which finds the emitter by BSDF sampling
+    only (``bsdf_sampled``) or also light-samples it (``light_sampled``, a Cycles gap: its
+    estimate changes with the sampling strategy). bpy 5.0.1: 0.62926 against 0.62873
+    (+0.08 %, z² 0.68, max |z| 1.68) and 0.64957 (−3.1 %, z² 4.56); Blender 3.4.1: 0.54593
+    (+15.3 %, z² 20.0) and 0.56277 (+11.8 %, z² 16.9). Roughness 0.55 exported (bpy 5.0.1):
+    +9.1 %, z² 14.3 (fail)."""
+    rough_slab_scene(light_sampled)
+    tag = f"slab_{'light' if light_sampled else 'bsdf'}"
+    e, c = render_seeds(tmp_path, tag, "PATH", **SLAB)
+    result = compare(f"{tag}/PATH", e, c, block=4)
+    assert result.passed, result.summary()
+
+
+@pytest.mark.skipif(not INJECT, reason="error injection: run with ERCUTS_INJECT_ERROR=1")
+def test_rough_slab_detects_a_wrong_roughness(tmp_path):
+    _skip_rough_glass_on_3x()
+    rough_slab_scene(light_sampled=False)
+    mat = bpy.data.materials["Slab"]
+    e, c = render_seeds(tmp_path, "slab_bsdf", "PATH", inject=lambda: _set_input(mat, "Roughness", 0.55),
+                        **SLAB)
+    assert not compare("slab_bsdf/PATH, roughness 0.55 exported", e, c, block=4).passed

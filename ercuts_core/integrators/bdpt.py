@@ -322,10 +322,15 @@ class BDPTIntegrator(Integrator):
         #: part of the rough image's indirect light that ERCUTS's chains and VPLs do not carry
         #: (:meth:`~.ercuts.integrator.ErcutsIntegrator._render` takes it out of P)
         self.delta_indirect = 0.0
-        #: … of those paths, the ones ERCUTS's direct-light passes path-trace when its gather
-        #: follows the camera through mirrors and windows (a late delta event, or at most one
-        #: other scattering vertex: ``PathIntegrator(paths='direct_and_late_delta')``); the
-        #: direct phase is sized by it
+        #: … of the paths outside the ER chains' domain when ERCUTS's gather follows the
+        #: camera through mirrors and glass: a delta event, or x1 or x2 on a mirror or glass
+        #: (``Bsdf.is_mirror_or_glass``); P leaves them out
+        self.outside_indirect = 0.0
+        #: … of all paths with two or more scattering vertices, those ERCUTS's direct-light
+        #: passes path-trace when its gather follows the camera through mirrors and glass (a
+        #: delta event outside the camera-side prefix of mirrors and glass, or at most one
+        #: scattering vertex outside it: ``PathIntegrator(paths='direct_and_late_delta')``);
+        #: the direct phase is sized by it
         self.traced_indirect = 0.0
 
     # ================================================================== driver
@@ -341,6 +346,7 @@ class BDPTIntegrator(Integrator):
         lig, no_s0 = self._light_subpaths(n, rng)
         L = np.zeros((3, n, 3))                  # by path class (film.path_class of s + t − 2)
         self._delta_counts = _delta_counts(cam, lig)
+        self._clear = (cam.clear, lig.clear)
         # Execute all connection strategies, one group of (s, t) pairs at a time
         with np.errstate(over="ignore", under="ignore"):
             for lane, s, t in self._rows_s0(cam).chunks(self.max_rows):
@@ -385,13 +391,15 @@ class BDPTIntegrator(Integrator):
         """Classify connection rows (lane, s, t) by their path and count their energies Y(c)
         (one pass's units). A path's *prefix* is its run of scattering vertices on mirrors
         and glass from the camera on (camera vertices 1 … t − 1, then light vertices s − 1,
-        s − 2, …; :func:`_delta_counts`); returns (R,) bool, the path is *traced* — it has a
-        delta event outside the prefix or at most one scattering vertex outside it: what
+        s − 2, …; :func:`_delta_counts`), x_d the vertex after it; returns (R,) bool, the path
+        is *traced* — it has a delta event outside the prefix, the vertex after x_d on a mirror
+        or glass, or at most one scattering vertex outside the prefix: what
         ERCUTS's direct passes render when its gather follows the camera through mirrors and
         glass (``PathIntegrator(paths='direct_and_late_delta')``). Of the rows with
         s + t − 2 ≥ 2 scattering vertices, those with a delta event — at a camera vertex
         1 … t − 2 or a light vertex 1 … s − 2 (a connection vertex is never one) — add to
-        :attr:`delta_indirect`, and the traced ones among them to :attr:`traced_indirect`."""
+        :attr:`delta_indirect`; those or the ones whose x1 or x2 is on a mirror or glass to
+        :attr:`outside_indirect`; the traced ones to :attr:`traced_indirect`."""
         cam_dc, cam_lead, lig_dc, lig_run = self._delta_counts
         scatter = s + t - 2
         cam_sc = np.maximum(np.where(s >= 1, t - 1, t - 2), 0)    # camera scattering vertices
@@ -401,13 +409,31 @@ class BDPTIntegrator(Integrator):
         total = cam_dc[tc, lane] + lig_dc[sc, lane]
         in_prefix = cam_dc[np.minimum(lead, tc), lane] + np.where(
             m >= 2, lig_dc[sc, lane] - lig_dc[np.maximum(s - m - 1, 0), lane], 0)
-        traced = (total > in_prefix) | (scatter - lead - m <= 1)
-        d = (total > 0) & (scatter >= 2)
-        if d.any():
-            y = luminance(c[d])
-            self.delta_indirect += float(y.sum())
-            self.traced_indirect += float(y[traced[d]].sum())
+        after = self._clear_after_prefix(lane, s, lead + m, cam_sc)
+        traced = (total > in_prefix) | after | (scatter - lead - m <= 1)
+        ind = np.flatnonzero(scatter >= 2)
+        if len(ind):
+            y = luminance(c[ind])
+            delta = total[ind] > 0
+            self.delta_indirect += float(y[delta].sum())
+            self.outside_indirect += float(y[delta | (lead[ind] + m[ind] >= 1) | after[ind]].sum())
+            self.traced_indirect += float(y[traced[ind]].sum())
         return traced
+
+    def _clear_after_prefix(self, lane: NDArray, s: NDArray, prefix: NDArray, cam_sc: NDArray) -> NDArray:
+        """(R,) the scattering vertex after x_d (the first one after the ``prefix`` (R,)
+        vertices on mirrors and glass; camera order: camera vertices 1 … ``cam_sc``, then light
+        vertices s − 1, s − 2, …) exists and is on a mirror or glass: no VPL can sit there."""
+        cam, lig = self._clear
+        pos = prefix + 2                                   # its index in camera order
+        on_cam = pos <= cam_sc
+        light_k = s - (pos - cam_sc)                       # on the light side: vertex s − j
+        out = np.zeros(len(lane), bool)
+        c = np.flatnonzero(on_cam)
+        out[c] = cam[pos[c], lane[c]]
+        g = np.flatnonzero(~on_cam & (light_k >= 1))
+        out[g] = lig[light_k[g], lane[g]]
+        return out
 
     def _record_strategies(self, s: NDArray, t: NDArray, pix: NDArray, c: NDArray) -> None:
         """Debug: add rows to the per-(s, t) images (window pixel indices ``pix``)."""

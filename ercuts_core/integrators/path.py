@@ -41,13 +41,14 @@ class PathIntegrator(Integrator):
     'direct_and_delta', those plus the paths with at most one scattering vertex (light seen
     directly and scattered once: ERCUTS's direct-light passes). 'direct_and_late_delta' is
     the complement of what ERCUTS's gather renders when it follows the camera through
-    mirrors and glass (:func:`~.ercuts.vpl.follow_specular`): paths with at most one
-    scattering vertex besides a *prefix* — the vertices on mirrors and glass
-    (``Bsdf.is_mirror_or_glass``) met before any other — (light seen directly, in a mirror or
-    through a window, and direct light at the first other surface), and paths with a *late*
-    delta event (outside the prefix: caustics, a lamp behind glass). Without delta materials
-    in the scene (``BuiltScene.has_delta``; for the last set, without mirrors and glass,
-    ``has_mirror_or_glass``) the last three stop after the first bounce.
+    mirrors and glass (:func:`~.ercuts.vpl.follow_specular`): a path's *prefix* is its run of
+    vertices on mirrors and glass (``Bsdf.is_mirror_or_glass``) from the camera on, x_d the
+    first vertex after it; the set holds the paths with at most one scattering vertex outside
+    the prefix (light seen directly, in a mirror or through a window, and direct light at
+    x_d), and those with a *late* event: a delta event outside the prefix (caustics, a lamp
+    behind glass) or the vertex after x_d on a mirror or glass (where no VPL can sit). Without
+    delta materials in the scene (``BuiltScene.has_delta``; for the last set, without mirrors
+    and glass, ``has_mirror_or_glass``) the last three stop after the first bounce.
     """
 
     def __init__(self, scene, settings, paths: str = "all"):
@@ -84,7 +85,7 @@ class PathIntegrator(Integrator):
         prev_pdf = np.zeros(n)             # BSDF pdf of the ray that led here (0: camera ray)
         prev_delta = np.zeros(n, bool)     # that ray came from a delta lobe (no MIS: weight 1)
         seen = np.zeros(n, bool)           # the path so far has a delta vertex
-        late = np.zeros(n, bool)           # … one outside the prefix of mirrors and glass
+        late = np.zeros(n, bool)           # … a late event (class docstring)
         nd = np.zeros(n, np.int64)         # vertices so far outside that prefix
         prev_p = np.zeros((n, 3))
         alpha = None
@@ -133,6 +134,9 @@ class PathIntegrator(Integrator):
                 self.record_first_hit(film, pix, keep, surf, bsdf)
             if len(idx) == 0:
                 break
+            clear = bsdf.is_mirror_or_glass if self.paths == "direct_and_late_delta" else None
+            if clear is not None:       # a VPL cannot sit on the mirror or glass after x_d
+                late = late | (clear & (nd == 1))
             nee = self._counted(depth + 1, seen, late, nd + 1)
             if not lights.empty and nee.any():
                 L_nee = self._next_event(surf, wo, bsdf, rng)
@@ -150,7 +154,7 @@ class PathIntegrator(Integrator):
             if len(keep) == 0:
                 break
             surf, beta, idx = surf.subset(keep), beta[keep], idx[keep]
-            prefix = bs.is_delta & bsdf.is_delta & (nd == 0)      # a camera-side mirror/window
+            prefix = clear & (nd == 0) if clear is not None else np.zeros(len(nd), bool)
             late = (late | (bs.is_delta & ~prefix))[keep]
             nd = (nd + ~prefix)[keep]
             seen = seen[keep] | bs.is_delta[keep]

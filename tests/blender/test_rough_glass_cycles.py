@@ -64,28 +64,11 @@ from cycles_stats import INJECT, SEEDS, compare, render_seeds, unsampled_emissio
 V = bpy.app.version
 pytestmark = pytest.mark.slow
 
-# ERCUTS does not gather VPL light that reaches a rough-glass shading point from behind its
-# surface: ercuts_core/integrators/ercuts/gather.py builds its ShadingPoints without
-# ``transmissive``, so the lightcuts' receiver cosine is max(0, n·ω) there and a VPL inside
-# the sphere (or behind the pane) contributes 0, while the VPLs' normalisation Ê1 (light
-# traced) counts that light. Flagging rough-glass points transmissive (one line, tried outside
-# the repository) makes them bright but then too bright (+12–21 % sphere, +11 % pane with
-# these settings; +14–26 % indirect at e1_samples 256, within 2 % at 4096): the 1/Ê1 blow-up
-# of test_glass_cycles.ERCUTS_SHARP_GLOSSY, at transmitting receivers.
-ERCUTS_ROUGH_GLASS = pytest.mark.xfail(strict=True, reason=(
-    "ERCUTS's gather drops VPL light reaching rough glass from behind its surface (gather.py: "
-    "ShadingPoints without transmissive): the glass renders dark — sphere block mean z² 15.4, "
-    "max |z| 16.5; frosted pane image mean −67 %, z² 26.5 (bpy 5.0.1)"))
-
-
-#: ERCUTS, a strict xfail in the rough-glass scenes, renders two seeds with shorter phases
-#: (CI time): it misses by 20σ and more either way.
-ERCUTS_XFAIL = dict(seeds=SEEDS[:2], ercuts_settings=dict(
-    rough_samples=8, direct_samples=16, chain_length=50, stochastic_passes=4, e1_samples=128))
-
-
-def _extra(integrator):
-    return ERCUTS_XFAIL if integrator == "ERCUTS" else {}
+# ERCUTS renders rough glass through its gather's shading points, which follow the camera
+# through mirrors and glass (vpl.follow_specular; before, VPL light reaching a rough-glass
+# point from behind its surface was dropped and the glass rendered dark: sphere block mean
+# z² 15.4, frosted pane −67 %), and its chains leave paths with x1 or x2 on glass to the
+# direct-light passes (a VPL on rough glass is Lambertian: the sphere's image was 1–3 % off).
 
 
 def _skip_rough_glass_on_3x():
@@ -136,14 +119,16 @@ def rough_sphere_scene():
 SPHERE = dict(samples=32, cycles_samples=128, max_depth=5)
 
 
-@pytest.mark.parametrize("integrator", ["PATH", "BDPT", pytest.param("ERCUTS", marks=ERCUTS_ROUGH_GLASS)])
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
 def test_rough_glass_sphere_agrees_with_cycles(tmp_path, integrator):
     """bpy 5.0.1: PATH rel −0.19/−0.18/−0.17 %, block mean z² 0.76, max |z| 1.79; BDPT
-    −0.20/−0.21/−0.22 %, 0.95, 2.84; ERCUTS (xfail, 2 seeds) +0.2/+2.1/+2.9 %, 15.4, 16.5.
+    −0.20/−0.21/−0.22 %, 0.95, 2.84; ERCUTS +0.14/+0.04/−0.02 %, 0.98, 2.96 (seeds 5–8:
+    −0.9/−0.5/−0.3 %, 1.20, 3.32; 9–12: +1.3/+0.4/+0.0 %, 0.88, 3.52; before the gather
+    followed the camera through glass: +0.2/+2.1/+2.9 %, 15.4, 16.5).
     IOR 1.4 exported: PATH z² 8.19, max |z| 11.5; BDPT 7.99, 11.7 (fail)."""
     _skip_rough_glass_on_3x()
     rough_sphere_scene()
-    e, c = render_seeds(tmp_path, "rough_sphere", integrator, **_extra(integrator), **SPHERE)
+    e, c = render_seeds(tmp_path, "rough_sphere", integrator, **SPHERE)
     result = compare(f"rough_sphere/{integrator}", e, c)
     assert result.passed, result.summary()
 
@@ -240,15 +225,16 @@ FROSTED = dict(samples=32, cycles_samples=128, max_depth=5)
 FROSTED_BDPT_SAMPLES = 16
 
 
-@pytest.mark.parametrize("integrator", ["PATH", "BDPT", pytest.param("ERCUTS", marks=ERCUTS_ROUGH_GLASS)])
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
 def test_lamp_behind_frosted_glass_agrees_with_cycles(tmp_path, integrator):
     """bpy 5.0.1: PATH rel −0.7/−0.7/−0.9 %, z² 0.77, max |z| 3.98; BDPT (16 spp)
-    +0.3/+0.4/+0.3 %, 0.66, 2.35; ERCUTS (xfail, 2 seeds) −67/−67/−69 %, 26.5, 21.2.
+    +0.3/+0.4/+0.3 %, 0.66, 2.35; ERCUTS +0.13/+0.11/−0.05 %, 0.93, 2.99 (seeds 5–8:
+    −1.2 %, 0.72, 1.92; 9–12: +0.8 %, 1.13, 3.51; before: −67/−67/−69 %, 26.5, 21.2).
     Roughness 0.5 exported: PATH +10 %, z² 2.08, max |z| 6.94; BDPT +9 %, 2.44, 5.69 (fail)."""
     _skip_rough_glass_on_3x()
     frosted_lamp_scene()
     settings = dict(FROSTED, samples=FROSTED_BDPT_SAMPLES) if integrator == "BDPT" else FROSTED
-    e, c = render_seeds(tmp_path, "frosted_lamp", integrator, **_extra(integrator), **settings)
+    e, c = render_seeds(tmp_path, "frosted_lamp", integrator, **settings)
     result = compare(f"frosted_lamp/{integrator}", e, c)
     assert result.passed, result.summary()
 

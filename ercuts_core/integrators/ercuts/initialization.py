@@ -30,7 +30,7 @@ from ...lights import AREA, ENV, POINT, SUN, TRI
 from ...sampling import luminance, power_heuristic
 from ...scene import BuiltScene
 from ...vecmath import dot
-from .paths import PathBatch, is_target
+from .paths import PathBatch, is_target, x1_or_x2_clear
 
 #: Camera samples of the rough BDPT image per iteration at most (issue 17): ``rough_samples``
 #: per pixel while that fits (160×120 keeps its 16), else the image is rendered at a lower
@@ -75,10 +75,12 @@ class RoughImage:
         self.film, self.full = film, full
         (W, H), (w, h) = full_size, low_size
         self.pixel_area = (W / w) * (H / h)        # full pixels per low-resolution pixel
-        #: indirect energy of the paths through delta lobes, and of those among them that the
-        #: direct-light passes path-trace (set by the integrator from
-        #: :attr:`BDPTIntegrator.delta_indirect` and ``traced_indirect``)
+        #: indirect energy of the paths through delta lobes, of those outside the chains'
+        #: domain and of those the direct-light passes path-trace when the gather follows
+        #: mirrors and glass (set by the integrator from :attr:`BDPTIntegrator.delta_indirect`,
+        #: ``outside_indirect``, ``traced_indirect``)
         self.delta_indirect = 0.0
+        self.outside_indirect = 0.0
         self.traced_indirect = 0.0
         self.same = film.window == full
         self._full: tuple[int, Film] | None = None     # (passes_done, full_film()) cache
@@ -148,12 +150,14 @@ def indirect_energy(light_parts: NDArray) -> float:
 
 
 def seeds_from_path_tracer(scene: BuiltScene, max_depth: int, rng: np.random.Generator,
-                           pix: NDArray | None = None, direct: bool = True) -> tuple[PathBatch, NDArray]:
+                           pix: NDArray | None = None, direct: bool = True,
+                           clear_x1: bool = True) -> tuple[PathBatch, NDArray]:
     """One path-traced sample per pixel; every NEE connection and BSDF-found emitter is a seed.
 
     Returns:
         (S paths, (S,) energies e = Y(w·C) in pixel units); target-class paths only
-        (:func:`.paths.is_target` with ``direct``).
+        (:func:`.paths.is_target` with ``direct``), and with ``clear_x1`` False only those
+        whose x1 and x2 are not on mirrors or glass (:func:`.paths.x1_or_x2_clear`).
     """
     cam, tracer = scene.camera, scene.tracer
     w = cam.window
@@ -195,6 +199,8 @@ def seeds_from_path_tracer(scene: BuiltScene, max_depth: int, rng: np.random.Gen
         return PathBatch.empty(0, K), np.zeros(0)
     paths, e = PathBatch.concat(out_paths), np.concatenate(out_e)
     keep = is_target(scene, paths, direct) & (e > 0)
+    if not clear_x1:
+        keep &= ~x1_or_x2_clear(scene, paths)
     return paths.take(keep), e[keep]
 
 

@@ -216,9 +216,11 @@ class ErcutsIntegrator:
             self.schedule.grow_direct(1.0 - P_vpl / P_all if P_all > 0 else 0.0)
             with self._phase("direct"):
                 base, alpha = self._direct_light("direct_and_late_delta" if follow else "direct_and_delta")
-            if follow:      # the direct passes no longer see every delta path: BDPT's estimate
-                self.stats["P_delta"], self.stats["P_traced"] = rough.delta_indirect, rough.traced_indirect
-                P = max(P - rough.delta_indirect, 0.0)
+            if follow:      # the chains' paths: no delta event, x1 and x2 not on mirrors or glass
+                st = self.stats
+                st["P_delta"], st["P_outside"] = rough.delta_indirect, rough.outside_indirect
+                st["P_traced"] = rough.traced_indirect
+                P = max(P - rough.outside_indirect, 0.0)
             else:
                 P = self._without_delta(P, base[2:])
         with self._phase("seeds"):
@@ -299,6 +301,7 @@ class ErcutsIntegrator:
         # (the camera-side estimate of the delta paths' indirect energy, full-window units)
         per_pass = rough.pixel_area / max(film.passes_done, 1)
         rough.delta_indirect = bdpt.delta_indirect * per_pass
+        rough.outside_indirect = bdpt.outside_indirect * per_pass
         rough.traced_indirect = bdpt.traced_indirect * per_pass
         return rough
 
@@ -382,9 +385,10 @@ class ErcutsIntegrator:
 
     def _seeds(self, rng, pix=None):
         s, scene = self.settings, self.scene
+        clear_x1 = not self._follows_specular()
         if s.seeding == "BDPT":
-            return seed_paths(scene, s, rng, pix)
-        return seeds_from_path_tracer(scene, s.max_depth, rng, pix, direct=s.direct_vpls)
+            return seed_paths(scene, s, rng, pix, clear_x1=clear_x1)
+        return seeds_from_path_tracer(scene, s.max_depth, rng, pix, direct=s.direct_vpls, clear_x1=clear_x1)
 
     def _chain_seeds(self, P: float, rng) -> tuple[PathBatch, NDArray]:
         """Seed paths (fresh paths, one sample per seed pixel) and their chain counts for
@@ -426,7 +430,8 @@ class ErcutsIntegrator:
     def _run_chains(self, seeds: PathBatch, starts: NDArray, rng):
         """``starts[i]`` chains of ``chain_length`` steps from each seed (paper §3.2)."""
         s, clock, sched = self.settings, self.clock, self.schedule
-        ctx = MutationContext(self.scene, s.max_depth + 1, direct=s.direct_vpls)
+        ctx = MutationContext(self.scene, s.max_depth + 1, direct=s.direct_vpls,
+                              clear_x1=not self._follows_specular())
         enabled = (s.lens_perturbation, s.caustic_perturbation, s.multichain_perturbation,
                    s.bidirectional_mutation)
         deadline = sched.deadline("chains")
@@ -449,6 +454,7 @@ class ErcutsIntegrator:
         label = f"| {stats['vpls_after_merge']} VPLs x {n_e1} E1 samples"
         vpls = make_vpls(self.scene, g, chains, e_d, gmax, n_e1, rng,
                          chunk=min(self.memory.e1_chunk, PROGRESS_E1_CHUNK),
+                         clear_receivers=not self._follows_specular(),
                          keep_going=lambda f: sched.report("VPLs", f, f"VPLs {100 * f:.0f}% {label}"))
         stats["vpls"] = len(vpls)
         stats["vpls_emitter"] = int(vpls.emitter.sum())

@@ -35,7 +35,7 @@ from ...lights import AREA, ENV, SUN, TRI
 from ...sampling import coordinate_system
 from ...scene import BuiltScene
 from ...vecmath import dot, normalize
-from .paths import PathBatch, edge_visible, slot_rows
+from .paths import PathBatch, edge_visible, slot_rows, x1_clear
 
 LENS, CAUSTIC, MULTICHAIN, BIDIR = 0, 1, 2, 3
 NAMES = ("lens", "caustic", "multichain", "bidirectional")
@@ -65,10 +65,14 @@ class Proposal:
 class MutationContext:
     """Per-render constants of the mutations (camera window, jump sizes, depth limit, target class)."""
 
-    def __init__(self, scene: BuiltScene, max_edges: int, direct: bool = True):
+    def __init__(self, scene: BuiltScene, max_edges: int, direct: bool = True, clear_x1: bool = True):
         self.scene = scene
         self.max_edges = max_edges
         self.direct = direct            # target class includes x2 on a light (is_target)
+        #: x1 and x2 may lie on mirrors or glass (False when the gather follows the camera
+        #: through them: a mutation that moves x1 or x2 there is a failed proposal,
+        #: :func:`.paths.x1_or_x2_clear`)
+        self.clear_x1 = clear_x1
         cam = scene.camera
         w = cam.window
         self.r1 = 0.1
@@ -87,6 +91,14 @@ def _set_vertex(paths: PathBatch, rows: NDArray, slot: NDArray | int, p, ng, ns,
     paths.ng[rows, slot] = ng
     paths.ns[rows, slot] = ns
     paths.mat[rows, slot] = mat
+
+
+def _x1_allowed(ctx: MutationContext, y: PathBatch, rows: NDArray, vertex: int = 1) -> NDArray:
+    """(len(rows),) the proposals' new x1 (or x_``vertex``) may be the chains'
+    (:attr:`MutationContext.clear_x1`)."""
+    if ctx.clear_x1 or len(rows) == 0:
+        return np.ones(len(rows), bool)
+    return ~x1_clear(ctx.scene, y.take(rows), vertex)
 
 
 def _in_window(scene: BuiltScene, raster: NDArray) -> NDArray:
@@ -110,6 +122,8 @@ def lens_perturbation(ctx: MutationContext, x: PathBatch, rng: np.random.Generat
     valid &= surf.valid
     rows = np.flatnonzero(valid)
     _set_vertex(y, rows, 1, surf.p[rows], surf.ng[rows], surf.ns[rows], surf.mat[rows])
+    valid[rows[~_x1_allowed(ctx, y, rows)]] = False
+    rows = np.flatnonzero(valid)
     if len(rows):
         vis = edge_visible(scene, y.take(rows), np.ones(len(rows), np.int64))
         valid[rows[~vis]] = False
@@ -155,6 +169,7 @@ def caustic_perturbation(ctx: MutationContext, x: PathBatch, rng: np.random.Gene
     valid &= surf.valid
     rows = np.flatnonzero(valid)
     _set_vertex(y, rows, 1, surf.p[rows], surf.ng[rows], surf.ns[rows], surf.mat[rows])
+    valid[rows[~_x1_allowed(ctx, y, rows)]] = False
     raster, on_film = cam.raster_of(surf.p, x.p[:, 0] if cam.has_lens else None)
     valid &= on_film
     y.raster = np.where(valid[:, None], raster, x.raster)
@@ -277,6 +292,8 @@ def bidirectional_mutation(ctx: MutationContext, x: PathBatch, rng: np.random.Ge
         y.ns[r, slot] = y.ng[r, slot]
         p_new[r] *= _light_vertex_pdf(scene, y, r)
         valid[r[~ok]] = False
+    r = np.flatnonzero(valid & (y.k >= 3))            # the new x2 scatters: not on mirrors, glass
+    valid[r[~_x1_allowed(ctx, y, r, 2)]] = False
     # Visibility of the connecting edge (slot ka → ka+1).
     r = np.flatnonzero(valid)
     if len(r):

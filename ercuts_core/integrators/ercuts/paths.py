@@ -128,6 +128,24 @@ def is_target(scene: BuiltScene, paths: PathBatch, direct: bool = True) -> NDArr
     return (paths.k >= 3) | ((paths.k == 2) & surface_light)
 
 
+def x1_clear(scene: BuiltScene, paths: PathBatch, vertex: int = 1) -> NDArray:
+    """(C,) x1 (or x_``vertex``) lies on a mirror or glass (``Bsdf.is_mirror_or_glass``):
+    with the gather following the camera through those, such paths are not the chains' (the
+    direct-light passes and the gather behind the surface render them; no VPL sits on one)."""
+    if not scene.has_mirror_or_glass or len(paths) == 0:
+        return np.zeros(len(paths), bool)
+    p, ng, ns, mat = paths.vertex(vertex)
+    return scene.bsdf(mat, ns, ng, p).is_mirror_or_glass
+
+
+def x1_or_x2_clear(scene: BuiltScene, paths: PathBatch) -> NDArray:
+    """(C,) x1 or a surface x2 lies on a mirror or glass (:func:`x1_clear`)."""
+    out = x1_clear(scene, paths)
+    x2 = np.flatnonzero(~out & (paths.k >= 3))          # x2 scatters (else it is the light)
+    out[x2] = x1_clear(scene, paths.take(x2), 2)
+    return out
+
+
 def contribution(scene: BuiltScene, paths: PathBatch, infinite_dir: NDArray | None = None,
                  with_x2_light: bool = False) -> tuple[NDArray, NDArray] | NDArray:
     """(C, 3) measurement contribution f(X) (module docstring), visibility not included.

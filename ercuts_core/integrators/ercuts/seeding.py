@@ -16,7 +16,7 @@ from ...lights import AREA, ENV, SUN, TRI
 from ...scene import BuiltScene
 from ...settings import RenderSettings
 from ..bdpt import BDPTIntegrator, Connection, Subpaths
-from .paths import PathBatch, contribution, is_target
+from .paths import PathBatch, contribution, is_target, x1_or_x2_clear
 
 
 class SeedCollector:
@@ -93,7 +93,7 @@ def _put_vertex(P: PathBatch, r: NDArray, slot: NDArray, path: Subpaths, k: NDAr
 
 
 def seed_paths(scene: BuiltScene, settings: RenderSettings, rng: np.random.Generator,
-               pix: NDArray | None = None) -> tuple[PathBatch, NDArray]:
+               pix: NDArray | None = None, clear_x1: bool = True) -> tuple[PathBatch, NDArray]:
     """Seed paths for the ER chains from one fresh BDPT sample per pixel.
 
     Every connection strategy with a non-zero, unoccluded MIS-weighted contribution w·C
@@ -106,6 +106,8 @@ def seed_paths(scene: BuiltScene, settings: RenderSettings, rng: np.random.Gener
 
     Args:
         pix: window pixels to sample (default: all).
+        clear_x1: keep paths whose x1 or x2 is on a mirror or glass (False when the gather
+            follows the camera through them: :func:`~.paths.x1_or_x2_clear`).
     Returns:
         (S paths with ``settings.max_depth + 2`` slots, (S,) energies).
     """
@@ -123,6 +125,8 @@ def seed_paths(scene: BuiltScene, settings: RenderSettings, rng: np.random.Gener
     keep = is_target(scene, paths, settings.direct_vpls) & (e > 0)
     if scene.has_delta:
         keep &= _no_delta_vertex(scene, paths)
+    if not clear_x1:
+        keep &= ~x1_or_x2_clear(scene, paths)
     return paths.take(keep), e[keep]
 
 

@@ -281,7 +281,8 @@ def estimate_e1(scene: BuiltScene, g: GBuffer, window: Window, pos: NDArray, nor
 
 def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, color: NDArray,
                               gmax: float, n_samples: int, rng: np.random.Generator,
-                              chunk: int = 1 << 18, keep_going=None, moments: bool = False):
+                              chunk: int = 1 << 18, keep_going=None, moments: bool = False,
+                              clear_receivers: bool = True):
     """(V,) Ê1 by tracing the VPL's own cosine emission one bounce to the camera.
 
     E1 = ∫_Ω f_r(y)·cosθ_v·|n_g(y)·ω_cam|·F(y)·V dω with F = 1/(A_pix·cos³θ·d_cam²) the
@@ -290,7 +291,9 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
     for the geometry clamp. Bounded for diffuse receivers away from the lens, unlike
     sampling pixels, whose samples near the VPL carry the 1/d² peak.
     ``keep_going(fraction) -> bool`` is called after each chunk; False stops (the rest stay 0).
-    With ``moments``, returns (Ê1, (V,) mean of the squared samples) instead.
+    With ``moments``, returns (Ê1, (V,) mean of the squared samples) instead. With
+    ``clear_receivers`` False, receivers on mirrors and glass count 0 (the gather follows the
+    camera through them, :func:`follow_specular`, so a VPL's image there is not its own).
     """
     from ...sampling import coordinate_system, sample_cosine_hemisphere, to_world
     cam = scene.camera
@@ -321,6 +324,8 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
                 win = -w[h[k]]
                 bsdf = scene.bsdf(yk.mat, ns, ng, yk.p)
                 fr = luminance(bsdf.eval(wcam, win) * color[vv[h[k]]])
+                if not clear_receivers:
+                    fr = np.where(bsdf.is_mirror_or_glass, 0.0, fr)
                 cos_g_in = np.abs(dot(ng, win))
                 ratio = np.abs(dot(ns, win)) / np.maximum(cos_g_in, 1e-12)
                 cos_cam = np.abs(dot(ng, wcam))
@@ -351,7 +356,7 @@ JENSEN_CORRECTION = True
 def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, color: NDArray,
                           weight: NDArray, gmax: float, n_samples: int, rng: np.random.Generator,
                           chunk: int = 1 << 18, keep_going=None, pilot: float = 0.25,
-                          max_factor: int = 16) -> NDArray:
+                          max_factor: int = 16, clear_receivers: bool = True) -> NDArray:
     """(V,) Ê1 by light tracing with the budget ``n_samples``·V spent where 1/Ê1 is biased.
 
     The normalisation divides by Ê1, and E[1/Ê1] ≈ (1/E1)(1 + c_v/N_v) (Jensen; c_v the
@@ -366,12 +371,14 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
     With :data:`JENSEN_CORRECTION` the estimate is returned as Ê1/(1 − ĉ_v/N_v) (ĉ_v/N_v
     capped at 0.5), so its reciprocal (1/Ê1)(1 − ĉ_v/N_v) loses the first-order bias: ĉ_v
     comes from the pilot, independent of the second-stage samples (delta method).
-    ``keep_going`` as in :func:`estimate_e1_light_tracing` (fractions over both stages).
+    ``keep_going`` and ``clear_receivers`` as in :func:`estimate_e1_light_tracing` (fractions
+    over both stages).
     """
     V = len(pos)
     n1 = max(4, int(round(n_samples * pilot)))
     if V == 0 or n_samples <= 2 * n1:
-        return estimate_e1_light_tracing(scene, pos, normal, color, gmax, n_samples, rng, chunk, keep_going)
+        return estimate_e1_light_tracing(scene, pos, normal, color, gmax, n_samples, rng, chunk, keep_going,
+                                         clear_receivers=clear_receivers)
     f1 = n1 / n_samples
     stop = [False]
 
@@ -386,7 +393,7 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
         return kg
 
     m, m2 = estimate_e1_light_tracing(scene, pos, normal, color, gmax, n1, rng, chunk,
-                                      stage(0.0, f1), moments=True)
+                                      stage(0.0, f1), moments=True, clear_receivers=clear_receivers)
     if stop[0]:
         return np.zeros(V)
     hit = m > 0
@@ -408,7 +415,8 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
             else:
                 hi_t = t
         counts = np.clip(lo_t * want, n1, hi).astype(np.int64)
-    e1 = estimate_e1_light_tracing(scene, pos, normal, color, gmax, counts, rng, chunk, stage(f1, 1.0))
+    e1 = estimate_e1_light_tracing(scene, pos, normal, color, gmax, counts, rng, chunk, stage(f1, 1.0),
+                                   clear_receivers=clear_receivers)
     if JENSEN_CORRECTION:
         # E[1/Ê1] ≈ (1/E1)(1 + c_v/N_v) (delta method); the pilot's ĉ_v is independent of
         # the second stage, so (1/Ê1)(1 − ĉ_v/N_v) is unbiased to second order.
@@ -417,16 +425,18 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
     # make_vpls, whose rare tiny values made single VPLs several % of the image energy).
     miss = np.flatnonzero(e1 <= 0)
     if len(miss) and not stop[0] and (keep_going is None or keep_going(1.0)):
-        e1[miss] = estimate_e1_light_tracing(scene, pos[miss], normal[miss], color[miss], gmax, hi, rng, chunk)
+        e1[miss] = estimate_e1_light_tracing(scene, pos[miss], normal[miss], color[miss], gmax, hi, rng, chunk,
+                                             clear_receivers=clear_receivers)
     return e1
 
 
 def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gmax: float,
               n_samples: int, rng: np.random.Generator, chunk: int = 1 << 18,
-              keep_going=None) -> VPLSet:
+              keep_going=None, clear_receivers: bool = True) -> VPLSet:
     """Normalise the chains' VPLs: I_v = k_v·e_d / Ê1(v) · c_v (module docstring); ``chunk``
-    E1 samples are traced together (the memory budget's ``e1_chunk``); ``keep_going`` as in
-    :func:`estimate_e1_light_tracing` (when it stops, the VPL set is incomplete)."""
+    E1 samples are traced together (the memory budget's ``e1_chunk``); ``keep_going`` and
+    ``clear_receivers`` as in :func:`estimate_e1_light_tracing` (when it stops, the VPL set
+    is incomplete; ``g``'s valid points are the receivers of the pixel-sampled fallback)."""
     window = scene.camera.window
     used = chains.count > 0
     pos, normal = chains.position[used], chains.normal[used]
@@ -436,7 +446,7 @@ def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gm
     color = np.where(y[:, None] > 0, color / np.where(y > 0, y, 1.0)[:, None], 0.0)
     emitter = chains.emitter[used] if chains.emitter is not None else np.zeros(len(count), bool)
     e1 = estimate_e1_allocated(scene, pos, normal, color, count.astype(np.float64), gmax, n_samples,
-                               rng, chunk, keep_going)
+                               rng, chunk, keep_going, clear_receivers=clear_receivers)
     miss = e1 <= 0
     # The emission found no camera-visible point: sample pixels instead (unless stopped).
     if miss.any() and (keep_going is None or keep_going(1.0)):

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .arrays import take_rows
-from .bsdf import DELTA_ALPHA, Bsdf, bsdf_max_value
+from .bsdf import DELTA_ALPHA, SHARP_ROUGHNESS, Bsdf, bsdf_max_value
 from .camera import Camera
 from .description import SceneDescription
 from .lights import LightSet
@@ -95,9 +95,10 @@ class BuiltScene:
         self.camera = Camera(desc.camera)
         self.scene_radius = self.lights.radius
         self.has_delta = _has_delta(desc.materials, self.tri_mat)
-        #: Some triangle's material may be a mirror or glass only (``Bsdf.is_mirror_or_glass``,
-        #: conservative: any transmission): ERCUTS's gather follows the camera through them.
-        self.has_mirror_or_glass = self.has_delta or _has_transmission(desc.materials, self.tri_mat)
+        #: Some triangle's material may be a mirror, glass or a polished metal
+        #: (``Bsdf.is_specular_or_glass``; conservative: any transmission, any metal below
+        #: roughness 0.5, any shading program): ERCUTS's gather follows the camera through them.
+        self.has_specular_or_glass = self.has_delta or _maybe_specular_or_glass(desc.materials, self.tri_mat)
 
     def intersect(self, o: NDArray, d: NDArray, tmax=None) -> Surface:
         """Trace rays and return their surface interactions."""
@@ -184,12 +185,15 @@ class BuiltScene:
         self.tracer.close()
 
 
-def _has_transmission(mats, tri_mat: NDArray) -> bool:
-    """True when some triangle's material transmits (a glass lobe, constant or programmed)."""
+def _maybe_specular_or_glass(mats, tri_mat: NDArray) -> bool:
+    """True when some triangle's material may be glass or a polished metal (conservative: it
+    transmits, or is metallic below roughness ``SHARP_ROUGHNESS``, or has a shading program)."""
     used = np.unique(tri_mat)
     used = used[(used >= 0) & (used < mats.n_materials)]
-    programs = [mats.programs[i] for i in used] if mats.has_programs else []
-    return bool((np.asarray(mats.transmission)[used] > 0).any() or any('"transmission"' in p for p in programs))
+    if mats.has_programs and any(mats.programs[i] for i in used):
+        return True
+    metal = (np.asarray(mats.metallic)[used] > 0) & (np.asarray(mats.roughness)[used] < SHARP_ROUGHNESS)
+    return bool((np.asarray(mats.transmission)[used] > 0).any() or metal.any())
 
 
 def _has_delta(mats, tri_mat: NDArray) -> bool:

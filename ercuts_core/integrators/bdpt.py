@@ -136,7 +136,7 @@ def _column_views(obj, data: NDArray) -> None:
 def _delta_counts(cam: "Subpaths", lig: "Subpaths") -> tuple[NDArray, ...]:
     """Per subpath vertex k (V, N), for classifying paths by :meth:`BDPTIntegrator._count_delta`:
     the delta events at vertices 1 … k of each subpath, the camera subpath's leading vertices
-    on mirrors and glass among 1 … k (``Bsdf.is_mirror_or_glass``: the prefix ERCUTS's gather
+    on mirrors and glass among 1 … k (``Bsdf.is_specular_or_glass``: the prefix ERCUTS's gather
     follows, :func:`~.ercuts.vpl.follow_specular`), and the light subpath's run of such
     vertices ending at k."""
     cam_clear = cam.clear.copy()
@@ -203,7 +203,7 @@ class Subpaths:
             then pdf_fwd of vertex k + 1 and pdf_rev of vertex k − 1 are 0.
         connectible: (V, N) False where every lobe of the vertex's BSDF is a delta lobe
             (``Bsdf.is_delta``, pbrt ``IsConnectible``); True where no BSDF was built.
-        clear: (V, N) the vertex's BSDF is a mirror or glass only (``Bsdf.is_mirror_or_glass``;
+        clear: (V, N) the vertex's BSDF is a mirror or glass only (``Bsdf.is_specular_or_glass``;
             the path classes of :meth:`BDPTIntegrator._count_delta`); False where none was built.
         reflect_only: (V, N) the vertex's BSDF has no glass lobe, so f = 0 unless wo and wi
             lie on one side (connection rows are pre-filtered by side only there; rough
@@ -324,7 +324,7 @@ class BDPTIntegrator(Integrator):
         self.delta_indirect = 0.0
         #: … of the paths outside the ER chains' domain when ERCUTS's gather follows the
         #: camera through mirrors and glass: a delta event, or x1 or x2 on a mirror or glass
-        #: (``Bsdf.is_mirror_or_glass``); P leaves them out
+        #: (``Bsdf.is_specular_or_glass``); P leaves them out
         self.outside_indirect = 0.0
         #: … of all paths with two or more scattering vertices, those ERCUTS's direct-light
         #: passes path-trace when its gather follows the camera through mirrors and glass (a
@@ -570,7 +570,7 @@ class BDPTIntegrator(Integrator):
             if last and not (film is not None and k == 1):
                 break
             bsdf = scene.bsdf(surf.mat, ns, ng, p)
-            path.clear[k, lanes] = bsdf.is_mirror_or_glass
+            path.clear[k, lanes] = bsdf.is_specular_or_glass
             if film is not None and k == 1:
                 self.record_first_hit(film, pix, keep, surf, bsdf)
             if last:

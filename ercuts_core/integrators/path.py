@@ -42,13 +42,13 @@ class PathIntegrator(Integrator):
     directly and scattered once: ERCUTS's direct-light passes). 'direct_and_late_delta' is
     the complement of what ERCUTS's gather renders when it follows the camera through
     mirrors and glass (:func:`~.ercuts.vpl.follow_specular`): a path's *prefix* is its run of
-    vertices on mirrors and glass (``Bsdf.is_mirror_or_glass``) from the camera on, x_d the
+    vertices on mirrors and glass (``Bsdf.is_specular_or_glass``) from the camera on, x_d the
     first vertex after it; the set holds the paths with at most one scattering vertex outside
     the prefix (light seen directly, in a mirror or through a window, and direct light at
     x_d), and those with a *late* event: a delta event outside the prefix (caustics, a lamp
     behind glass) or the vertex after x_d on a mirror or glass (where no VPL can sit). Without
     delta materials in the scene (``BuiltScene.has_delta``; for the last set, without mirrors
-    and glass, ``has_mirror_or_glass``) the last three stop after the first bounce.
+    and glass, ``has_specular_or_glass``) the last three stop after the first bounce.
     """
 
     def __init__(self, scene, settings, paths: str = "all"):
@@ -57,7 +57,7 @@ class PathIntegrator(Integrator):
             raise ValueError(f"unknown path set {paths!r}; expected one of {PATH_SETS}")
         self.paths = paths
         self.max_depth = settings.max_depth
-        if paths != "all" and not (scene.has_mirror_or_glass if paths == "direct_and_late_delta"
+        if paths != "all" and not (scene.has_specular_or_glass if paths == "direct_and_late_delta"
                                    else scene.has_delta):
             self.max_depth = min(self.max_depth, 1)
 
@@ -134,7 +134,7 @@ class PathIntegrator(Integrator):
                 self.record_first_hit(film, pix, keep, surf, bsdf)
             if len(idx) == 0:
                 break
-            clear = bsdf.is_mirror_or_glass if self.paths == "direct_and_late_delta" else None
+            clear = bsdf.is_specular_or_glass if self.paths == "direct_and_late_delta" else None
             if clear is not None:       # a VPL cannot sit on the mirror or glass after x_d
                 late = late | (clear & (nd == 1))
             nee = self._counted(depth + 1, seen, late, nd + 1)
@@ -157,6 +157,11 @@ class PathIntegrator(Integrator):
             prefix = clear & (nd == 0) if clear is not None else np.zeros(len(nd), bool)
             late = (late | (bs.is_delta & ~prefix))[keep]
             nd = (nd + ~prefix)[keep]
+            if clear is not None and not scene.has_delta:
+                # without delta lobes nothing after x_(d+1) can make a path late: stop it
+                go = np.flatnonzero(late | (nd < 2))
+                surf, beta, idx, keep = surf.subset(go), beta[go], idx[go], keep[go]
+                late, nd = late[go], nd[go]
             seen = seen[keep] | bs.is_delta[keep]
             d = bs.wi[keep]
             prev_pdf, prev_p, prev_delta = bs.pdf[keep], surf.p, bs.is_delta[keep]

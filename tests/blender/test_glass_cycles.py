@@ -26,7 +26,7 @@ import pytest
 
 import blender_helpers as h
 import ercuts_core  # noqa: F401  (a missing core must fail these tests)
-from cycles_stats import INJECT, SEEDS, compare, render_seeds
+from cycles_stats import INJECT, compare, render_seeds
 
 pytestmark = pytest.mark.slow
 V = bpy.app.version
@@ -92,27 +92,24 @@ def test_white_mirror_floor(tmp_path, integrator):
 
 # ERCUTS normalises each VPL by its image energy Ê1, estimated by tracing the VPL's cosine
 # emission one bounce to the camera (vpl.estimate_e1_light_tracing). Where the camera sees a
-# sharp glossy lobe that estimate is heavy-tailed: it is mostly too small, and 1/Ê1 too large
-# (the pilot's Jensen correction cannot see a lobe it never hits). Measured on this floor
-# (core, 64×48, seed 1): VPL image energy 24.4× P at e1_samples 256, 1.93× at 4096; with
-# normalize_to_p the indirect light is within 7 % of PATH's.
-ERCUTS_SHARP_GLOSSY = pytest.mark.xfail(strict=True, reason=(
-    "ERCUTS's VPL normalisation 1/Ê1 blows up at sharp glossy receivers (one-bounce light-traced "
-    "Ê1 misses the lobe): glossy floor of roughness 0.1, indirect light ×26 (VPL image energy "
-    "24.4× P), image mean ×3–4; roughness 0.05: ×880; 0.2: ×2.3 (bpy 5.0.1, 64×48)"))
+# sharp glossy lobe that estimate is heavy-tailed — mostly too small, 1/Ê1 too large: the
+# VPL image was 24.4× P on this floor (×26 its indirect light, image mean ×3–4; roughness
+# 0.05: ×880; 0.2: ×2.3). Now the gather follows the camera through such polished metals
+# (Bsdf.is_specular_or_glass, roughness < 0.5) and the chains and Ê1 leave them out.
 
 
-@pytest.mark.parametrize("integrator", ["PATH", "BDPT", pytest.param("ERCUTS", marks=ERCUTS_SHARP_GLOSSY)])
+@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
 def test_white_glossy_floor(tmp_path, integrator):
     """A white GGX floor of roughness 0.1 (the mirror scene, with the point light for all).
     bpy 5.0.1: PATH rel +0.39/+0.21/+0.07 %, z² 1.05, max |z| 2.47; BDPT +0.59/+0.32/+0.12 %,
-    1.10, 2.80; ERCUTS (xfail, 2 seeds) +322/+193/+86 %, 3.51 (χ² p 6·10⁻¹⁷), 4.88. Blender
+    1.10, 2.80; ERCUTS +1.95/+1.08/+0.42 %, 0.67, 1.55 (seeds 5–8: +0.2 %, 1.15, 2.25; 9–12:
+    +1.3/+0.7/+0.3 %, 0.86, 2.21; before the gather followed polished metals: +322/+193/+86 %,
+    3.51 (χ² p 6·10⁻¹⁷), 4.88). Blender
     3.4.1: PATH 0.92, 2.54; BDPT 0.94, 2.61. Roughness 0.13 exported: PATH z² 3.24, max |z|
     6.99 (3.4.1: 2.42, 6.94); BDPT 3.88, 6.60 (3.4.1: 2.98, 6.55) (fail)."""
     _skip_on_3x(integrator)
     glossy_floor_scene()
-    seeds = dict(seeds=SEEDS[:2]) if integrator == "ERCUTS" else {}  # strict xfail, far off: CI time
-    e, c = render_seeds(tmp_path, "glossy_floor", integrator, **seeds, **GLASS)
+    e, c = render_seeds(tmp_path, "glossy_floor", integrator, **GLASS)
     result = compare(f"glossy_floor/{integrator}", e, c)
     assert result.passed, result.summary()
 

@@ -81,7 +81,7 @@ rough BDPT image's delta paths (``stats['P_delta']``, BDPT's own count, light tr
 included; ``stats['P_traced']`` the part the direct passes render, which sizes their
 phase), the chains reject delta events, BDPT seeds through a delta vertex are dropped, and
 delta lobes' lightcut bounds are 0. Scenes without mirrors and glass
-(``BuiltScene.has_mirror_or_glass``) are rendered exactly as before.
+(``BuiltScene.has_specular_or_glass``) are rendered exactly as before.
 
 Spare time (:mod:`.balance`): when the last iteration fills its time, each further pass goes
 to the direct-light passes or to the stochastic gather, whichever lowers the image's measured
@@ -354,7 +354,7 @@ class ErcutsIntegrator:
         """The gather follows the camera through perfect mirrors and glass
         (:func:`~.vpl.follow_specular`): with ``direct_light='NEE'`` in scenes with such
         materials, unless :data:`FOLLOW_SPECULAR` (the ablation) is off."""
-        return FOLLOW_SPECULAR and not self.settings.direct_vpls and self.scene.has_mirror_or_glass
+        return FOLLOW_SPECULAR and not self.settings.direct_vpls and self.scene.has_specular_or_glass
 
     def _delta_paths(self) -> NDArray:
         """(3, h·w, 3) light passes of the paths through a mirror or smooth glass

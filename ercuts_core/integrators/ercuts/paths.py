@@ -129,13 +129,13 @@ def is_target(scene: BuiltScene, paths: PathBatch, direct: bool = True) -> NDArr
 
 
 def x1_clear(scene: BuiltScene, paths: PathBatch, vertex: int = 1) -> NDArray:
-    """(C,) x1 (or x_``vertex``) lies on a mirror or glass (``Bsdf.is_mirror_or_glass``):
+    """(C,) x1 (or x_``vertex``) lies on a mirror or glass (``Bsdf.is_specular_or_glass``):
     with the gather following the camera through those, such paths are not the chains' (the
     direct-light passes and the gather behind the surface render them; no VPL sits on one)."""
-    if not scene.has_mirror_or_glass or len(paths) == 0:
+    if not scene.has_specular_or_glass or len(paths) == 0:
         return np.zeros(len(paths), bool)
     p, ng, ns, mat = paths.vertex(vertex)
-    return scene.bsdf(mat, ns, ng, p).is_mirror_or_glass
+    return scene.bsdf(mat, ns, ng, p).is_specular_or_glass
 
 
 def x1_or_x2_clear(scene: BuiltScene, paths: PathBatch) -> NDArray:

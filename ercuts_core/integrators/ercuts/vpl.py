@@ -110,7 +110,7 @@ SPECULAR_BOUNCES = 16
 def follow_specular(scene: BuiltScene, g: GBuffer, rng: np.random.Generator,
                     max_bounces: int = SPECULAR_BOUNCES) -> GBuffer:
     """Move ``g``'s points on perfect mirrors and glass (smooth or rough: every lobe a delta
-    or a dielectric lobe, :attr:`~ercuts_core.bsdf.Bsdf.is_mirror_or_glass`) along the camera
+    or a dielectric lobe, :attr:`~ercuts_core.bsdf.Bsdf.is_specular_or_glass`) along the camera
     path to the first surface that is not one (algorithm.md §G.3; Keller's and pbrt-v2's IGI
     follow SpecularReflect/Transmit the same way), so that the gather shades what a mirror
     shows or a window lets through with the VPLs instead of leaving it to a path tracer (a
@@ -128,7 +128,7 @@ def follow_specular(scene: BuiltScene, g: GBuffer, rng: np.random.Generator,
     opaque specular lobe besides (a smooth coat on a diffuse base) are not followed: their
     delta event stays a path-traced path. ``through`` marks the moved points (see :func:`first_hits_only`)."""
     g.weight, g.through = np.ones((len(g.pixel), 3)), np.zeros(len(g.pixel), bool)
-    if not scene.has_mirror_or_glass:
+    if not scene.has_specular_or_glass:
         return g
     surf, wo, weight, through = g.surf, g.wo, g.weight, g.through
     lanes = np.flatnonzero(surf.valid)
@@ -136,7 +136,7 @@ def follow_specular(scene: BuiltScene, g: GBuffer, rng: np.random.Generator,
         if len(lanes) == 0:
             break
         bsdf = scene.bsdf(surf.mat[lanes], surf.ns[lanes], surf.ng[lanes], surf.p[lanes])
-        clear = bsdf.is_mirror_or_glass
+        clear = bsdf.is_specular_or_glass
         lanes, bsdf = lanes[clear], bsdf.subset(clear)
         if len(lanes) == 0 or bounce == max_bounces:
             surf.valid[lanes] = False
@@ -325,7 +325,7 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
                 bsdf = scene.bsdf(yk.mat, ns, ng, yk.p)
                 fr = luminance(bsdf.eval(wcam, win) * color[vv[h[k]]])
                 if not clear_receivers:
-                    fr = np.where(bsdf.is_mirror_or_glass, 0.0, fr)
+                    fr = np.where(bsdf.is_specular_or_glass, 0.0, fr)
                 cos_g_in = np.abs(dot(ng, win))
                 ratio = np.abs(dot(ns, win)) / np.maximum(cos_g_in, 1e-12)
                 cos_cam = np.abs(dot(ng, wcam))

@@ -636,7 +636,9 @@ def bsdf_max_value(table: MaterialTable, mat_idx: ArrayLike) -> F64:
     (f_spec ∝ 1/(n·wo n·wi)), so this is an approximation for glossy materials: the
     lightcuts use the per-cluster bound :func:`ggx_cosine_bound` at glossy receivers
     (:class:`ercuts_core.integrators.ercuts.lightcuts.GlossyReceivers`). Delta lobes are not
-    part of ``Bsdf.eval`` (no VPL lights them), so their bound is 0.
+    part of ``Bsdf.eval`` (no VPL lights them), so their bound is 0. The rough glass term
+    below is no bound either (reflection ×10³ at grazing views, transmission ×1.5,
+    tests/test_rough_glass_bound.py): the lightcuts use :func:`rough_glass_cosine_bound` there.
     """
     idx = np.asarray(mat_idx, dtype=np.int64).reshape(-1)
     n = idx.shape[0]

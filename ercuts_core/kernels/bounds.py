@@ -13,7 +13,11 @@ which numpy computes through BLAS (possibly with fused multiply-adds): bounds ag
 ~1 ulp (``tests/test_kernels.py`` measures it).
 
 Glossy receivers' per-cluster GGX bound is not compiled: :func:`cluster_bound` of
-:mod:`.lightcuts` patches those entries with numpy afterwards.
+:mod:`.lightcuts` patches those entries with numpy afterwards.  Rough glass receivers' bound
+(``lightcuts.GlossyReceivers`` with ``glass``; :func:`ercuts_core.bsdf.rough_glass_cosine_bound`)
+is: :func:`glass_bounds` computes their whole L̄_C in numpy's order of operations, with square
+roots only, so it agrees with numpy to the luminance dot product's last bit (measured ≤ 4.4e-16
+relative; ``tests/test_kernels.py``).
 """
 from __future__ import annotations
 

@@ -12,7 +12,11 @@ Its error is bounded by
 ``L̄_C = cosbound(x, n_x, box_C) · Ḡ_C · Y(f̄_x ⊙ I_C)`` (V̄ = 1; shared docs algorithm.md
 §E.2 (a)–(c)); leaves are exact.  At glossy receivers (:class:`GlossyReceivers`) the
 material factor cosbound·f̄_x is a per-cluster bound of the GGX lobe instead (the lobe's
-peak f̄_x is exceeded there, up to ∝ 1/(n·wo) at grazing angles).  Starting from the root, every cut node whose bound
+peak f̄_x is exceeded there, up to ∝ 1/(n·wo) at grazing angles), and at rough glass
+receivers of its reflection and transmission lobes (Walter et al. 2007;
+:func:`ercuts_core.bsdf.rough_glass_cosine_bound`: the lobe at normal incidence was exceeded
+×10³ toward the reflection peak at grazing views and ×1.5 on the transmission side,
+tests/test_rough_glass_bound.py).  Starting from the root, every cut node whose bound
 exceeds ``max_error`` × (the point's current total estimate) is replaced by its two
 children (Weber's law, 2 %), until no node qualifies or the cut holds ``max_cut_size``
 nodes.  The child that shares its parent's representative reuses M·G·V (scaled by
@@ -91,8 +95,9 @@ class GlossyReceivers:
 
         M̄ += [cosbound(x, n, B) > 0]·kr·refl + [cosbound(x, −n, B) > 0]·kt·trans,
 
-    with the four box cosines wo·wi ∈ [−cosbound(x, −wo, B), cosbound(x, wo, B)],
-    cosbound(x, r, B) and cosbound(x, t, B) (t the refraction of wo about n).  The receiver
+    with the four box cosines wo·wi ∈ [−scb(x, −wo, B), scb(x, wo, B)], scb(x, r, B) and
+    scb(x, t, B) (scb = :func:`signed_cosine_bound`, which may be negative; t the refraction
+    of wo about n).  The receiver
     cosine |n·wi| of a transmissive point (``ShadingPoints.transmissive``) cancels the
     1/|n·wi| of both lobes; at a point that is not transmissive (only max(0, n_x·wi) counts)
     the same M̄ still bounds M.  The diffuse and opaque specular parts of such a point (a

@@ -735,15 +735,16 @@ def rough_glass_cosine_bound(cos_o: ArrayLike, alpha: ArrayLike, eta: ArrayLike,
     Walter et al. 2007 eq. 21's radiance form is in).
 
     The set of directions (a lightcut cluster's box B seen from the point, Walter et al. 2005
-    §4) enters through four cosines, each an upper bound over it (Walter's box-in-axis-frame
-    bound, ``lightcuts.cosine_bound``): ``w_min`` ≤ wo·wi ≤ ``w_max``, cos∠(r, wi) ≤ ``cos_r``
+    §4) enters through four cosine bounds over it (Walter's box-in-axis-frame bound, signed:
+    ``lightcuts.signed_cosine_bound``): ``w_min`` ≤ wo·wi ≤ ``w_max``, cos∠(r, wi) ≤ ``cos_r``
     (r = 2(n·wo)n − wo the mirror direction), cos∠(t, wi) ≤ ``cos_t`` (t the refraction of wo
-    about n, pbrt-v4 eq. 9.4; ignored where wo is beyond the critical angle).
+    about n, pbrt-v4 eq. 9.4, :func:`refracted_direction`; ignored where wo is beyond the
+    critical angle).  Directions are unit vectors; M in sr⁻¹ (f in sr⁻¹ times a cosine).
 
     Args:
         cos_o: (N,) n·wo with the lobe's normal flipped to wo's side (≤ COS_EPS: M = 0).
         alpha: (N,) GGX alpha (≤ 1).
-        eta: (N,) relative index η' = η_t/η_i for this wo (``Bsdf._eta_rel``; ≠ 1).
+        eta: (N,) relative index η' = η_t/η_i for this wo (``Bsdf.eta_rel``; ≠ 1).
         w_min, w_max, cos_r, cos_t: (N,) the cosine bounds above.
 
     Derivation (e = η', c = wo·h, h the (generalized) half vector, G1(wo) = 1/(1 + Λ(wo))):
@@ -770,9 +771,10 @@ def rough_glass_cosine_bound(cos_o: ArrayLike, alpha: ArrayLike, eta: ArrayLike,
       Jacobian of the generalized half vector, Walter et al. 2007 eq. 17, inverted:
       |dh| = e·|P_h dwi|/|wo + e·wi| ≥ e·|wi·h|·|dwi|/|c − s|), K decreasing in c, and c ≥
       min(n·wo, c_lo) on the arc from n to h; the arc maps to a path from t to wi, so
-      ∠(t, wi) ≤ K·θ_h.  Then tan(θ_h/2) ≥ tan(θ_t/2)/K for K ≤ 1 (tan convex) and
-      sin(θ_h/2) ≥ sin(θ_t/2)/K for K > 1 (sin concave), θ_t = arccos(cos_t): only
-      square roots, so the compiled kernel computes the same numbers.
+      ∠(t, wi) ≤ K·θ_h.  Then tan(θ_h/2) ≥ tan(θ_t/2)/K for K ≤ 1 (tan convex; where
+      θ_t/K ≥ π no such h exists) and sin(θ_h/2) ≥ sin(θ_t/2)/K for K > 1 (sin concave),
+      θ_t = arccos(cos_t): only square roots, so the compiled kernel
+      (``kernels.bounds.rough_glass_bound1``) computes the same numbers.
       For e > 1, K < 1 everywhere (entering glass compresses directions ×(1 − 1/e) at normal
       incidence); for e < 1, K → ∞ at the critical angle (no information there).
     * 1 − F = (T_s + T_p)/2 ≤ (1 − R_s(c))/2 + 1/2 ≤ 1 − R_s(c_hi)/2 (R_s non-increasing in

@@ -559,6 +559,10 @@ class Bsdf:
         points to (entering), 1/η when it leaves."""
         return np.where(dot(wo, self.ng) > 0.0, self.eta, 1.0 / self.eta)
 
+    def eta_rel(self, wo: ArrayLike) -> F64:
+        """(N,) relative index η' = η_t/η_i of the glass lobe for unit wo (N, 3) (as in eval)."""
+        return self._eta_rel(_as3(wo))
+
     def _sample_rough_glass(self, wo: F64, wo_l: F64, m: F64, u0: F64, wi_l: F64) -> F64:
         """(N, 3) local directions: where u0 picked the rough glass lobe (u0 ≥ 1 − p_tr), the
         reflection (probability F, from the rescaled u0) or the refraction of wo about the
@@ -650,7 +654,9 @@ def bsdf_max_value(table: MaterialTable, mat_idx: ArrayLike) -> F64:
     (f_spec ∝ 1/(n·wo n·wi)), so this is an approximation for glossy materials: the
     lightcuts use the per-cluster bound :func:`ggx_cosine_bound` at glossy receivers
     (:class:`ercuts_core.integrators.ercuts.lightcuts.GlossyReceivers`). Delta lobes are not
-    part of ``Bsdf.eval`` (no VPL lights them), so their bound is 0.
+    part of ``Bsdf.eval`` (no VPL lights them), so their bound is 0. The rough glass term
+    below is no bound either (reflection ×10³ at grazing views, transmission ×1.5,
+    tests/test_rough_glass_bound.py): the lightcuts use :func:`rough_glass_cosine_bound` there.
     """
     idx = np.asarray(mat_idx, dtype=np.int64).reshape(-1)
     n = idx.shape[0]
@@ -705,3 +711,133 @@ def ggx_cosine_bound(cos_o: ArrayLike, alpha: ArrayLike, cos_r: ArrayLike) -> F6
     cos_h = np.sqrt(0.5 * (1.0 + np.clip(np.asarray(cos_r, np.float64), -1.0, 1.0)))
     g1_4 = _div(1.0, 4.0 * np.maximum(cos_o, 0.0) * (1.0 + smith_lambda(cos_o, alpha)))
     return np.where(cos_o > COS_EPS, ggx_d(cos_h, alpha) * g1_4, 0.0)
+
+
+def refracted_direction(wo: ArrayLike, n: ArrayLike, eta: ArrayLike) -> tuple[F64, B]:
+    """The refraction t (N, 3) of unit wo (N, 3) about the unit normal n (N, 3) on wo's side,
+    relative index ``eta`` (N,) = η_t/η_i [pbrt-v4 eq. 9.4], and (N,) bool: it exists
+    (n·wo > 0 and no total internal reflection); elsewhere t = −n."""
+    wo, n = _as3(wo), _as3(n)
+    eta = np.asarray(eta, np.float64).reshape(-1)
+    cos_o = dot(wo, n)
+    F, cos_t = fresnel_dielectric(np.clip(cos_o, 0.0, 1.0), eta)
+    ok = (cos_o > 0.0) & (F < 1.0)
+    return np.where(ok[:, None], _refract(wo, n, cos_o, eta, cos_t), -n), ok
+
+
+def fresnel_perp(cos_i: ArrayLike, eta: ArrayLike) -> F64:
+    """s-polarised Fresnel reflectance R_s = ((c − s)/(c + s))², s = √(η² − 1 + c²) = η·cos θ_t
+    (1 under total internal reflection), (N,), of a dielectric interface of relative index η
+    (η_t/η_i) at incidence cosine c = cos_i ∈ [0, 1] [pbrt-v4 eq. 9.3 (r_⊥)].
+
+    An upper bound of the unpolarised reflectance F = (R_s + R_p)/2 of
+    :func:`fresnel_dielectric` (R_p = R_s·cos²(θ_i + θ_t)/cos²(θ_i − θ_t) ≤ R_s), and R_s is
+    non-increasing in c (s/c is monotone in c), so F(c) ≤ fresnel_perp(c_lo) for every
+    c ≥ c_lo.  F itself is not monotone for large η (at η = 10 it dips near Brewster's
+    angle), R_s is.
+    """
+    c = np.clip(np.asarray(cos_i, np.float64), 0.0, 1.0)
+    eta = np.asarray(eta, np.float64)
+    s2 = (eta - 1.0) * (eta + 1.0) + c * c
+    s = np.sqrt(np.maximum(s2, 0.0))
+    r = _div(c - s, c + s)
+    return np.where(s2 > 0.0, r * r, 1.0)
+
+
+def rough_glass_cosine_bound(cos_o: ArrayLike, alpha: ArrayLike, eta: ArrayLike, w_min: ArrayLike,
+                             w_max: ArrayLike, cos_r: ArrayLike, cos_t: ArrayLike) -> tuple[F64, F64]:
+    """Upper bounds (refl, trans), (N,) each, of the rough glass lobe's material term
+    M = f(wo, wi)·|n·wi| over a set of directions wi [sr⁻¹], per unit lobe weight: the
+    reflection part (wi above the surface) is ≤ kr·refl, the transmission part (wi below)
+    ≤ kt·trans, in radiance transport (``Bsdf.eval(adjoint=False)``: the ÷ η'² of
+    Walter et al. 2007 eq. 21's radiance form is in).
+
+    The set of directions (a lightcut cluster's box B seen from the point, Walter et al. 2005
+    §4) enters through four cosine bounds over it (Walter's box-in-axis-frame bound, signed:
+    ``lightcuts.signed_cosine_bound``): ``w_min`` ≤ wo·wi ≤ ``w_max``, cos∠(r, wi) ≤ ``cos_r``
+    (r = 2(n·wo)n − wo the mirror direction), cos∠(t, wi) ≤ ``cos_t`` (t the refraction of wo
+    about n, pbrt-v4 eq. 9.4, :func:`refracted_direction`; ignored where wo is beyond the
+    critical angle).  Directions are unit vectors; M in sr⁻¹ (f in sr⁻¹ times a cosine).
+
+    Args:
+        cos_o: (N,) n·wo with the lobe's normal flipped to wo's side (≤ COS_EPS: M = 0).
+        alpha: (N,) GGX alpha (≤ 1).
+        eta: (N,) relative index η' = η_t/η_i for this wo (``Bsdf.eta_rel``; ≠ 1).
+        w_min, w_max, cos_r, cos_t: (N,) the cosine bounds above.
+
+    Derivation (e = η', c = wo·h, h the (generalized) half vector, G1(wo) = 1/(1 + Λ(wo))):
+
+    * Reflection [Walter et al. 2007 eq. 20]: M = D(h)·G2·F(c)/(4 n·wo).  G2 ≤ G1(wo)
+      [Heitz 2014 eq. 99], D ≤ D(√((1 + cos_r)/2)) (the half-vector cone of
+      :func:`ggx_cosine_bound`), and F ≤ R_s(c) ≤ R_s(√((1 + w_min)/2)) (:func:`fresnel_perp`;
+      c = wo·h = √((1 + wo·wi)/2)).  So refl = R_s·D·G1(wo)/(4 n·wo).
+    * Transmission [eqs. 16, 21]: with h ∝ −(wo + e·wi) (e > 1) or +(wo + e·wi) (e < 1),
+      wi is the refraction of wo about h, −wi·h = s/e with s = √(e² − 1 + c²), and
+      |wo + e·wi| = |c − s| = |1 − e²|/(c + s).  The receiver cosine cancels |n·wi| and
+
+          M = D(h)·G2·(1 − F)·c·|wi·h| / (n·wo·(c − s)²) ≤ G1(wo)/(n·wo) · D(h) · T(c),
+          T(c) = c·s·(c + s)² / (e·(e² − 1)²),
+
+      T increasing in c (T(1) = 1/(e − 1)²: the peak at normal incidence).
+    * c over the set: c = f(wo·wi) = σ(1 + e·w)/√((1 − e)² + 2e(1 + w)) (σ = −1 for e > 1,
+      +1 for e < 1) is decreasing in w on the transmitting range w ≤ −min(e, 1/e) (beyond it
+      there is no refraction: no transmission, or total internal reflection), so
+      c ≤ c_hi = f(min(w_min, −min(e, 1/e))) and c ≥ c_lo = f(min(w_max, −min(e, 1/e))).
+    * θ_h = ∠(n, h) from below, two ways; D uses the smaller cosine:
+      (i) the triangle inequality θ_h ≥ θ_o − ∠(wo, h) ≥ θ_o − arccos(c_lo);
+      (ii) the refraction map h ↦ wi stretches arcs by at most K(c) = |c − s|/s (the
+      Jacobian of the generalized half vector, Walter et al. 2007 eq. 17, inverted:
+      |dh| = e·|P_h dwi|/|wo + e·wi| ≥ e·|wi·h|·|dwi|/|c − s|), K decreasing in c, and c ≥
+      min(n·wo, c_lo) on the arc from n to h; the arc maps to a path from t to wi, so
+      ∠(t, wi) ≤ K·θ_h.  Then tan(θ_h/2) ≥ tan(θ_t/2)/K for K ≤ 1 (tan convex; where
+      θ_t/K ≥ π no such h exists) and sin(θ_h/2) ≥ sin(θ_t/2)/K for K > 1 (sin concave),
+      θ_t = arccos(cos_t): only square roots, so the compiled kernel
+      (``kernels.bounds.rough_glass_bound1``) computes the same numbers.
+      For e > 1, K < 1 everywhere (entering glass compresses directions ×(1 − 1/e) at normal
+      incidence); for e < 1, K → ∞ at the critical angle (no information there).
+    * 1 − F = (T_s + T_p)/2 ≤ (1 − R_s(c))/2 + 1/2 ≤ 1 − R_s(c_hi)/2 (R_s non-increasing in
+      c, :func:`fresnel_perp`); G2 ≤ G1(wo) as above.  So
+      trans = D(cos θ_h,max)·T(c_hi)·(1 − R_s(c_hi)/2)·G1(wo)/(n·wo).
+
+    Both are finite (G1(wo)/(n·wo) ≤ 2/(α sin θ_o) at grazing wo) and exact at the peak
+    (wi = r or t at normal incidence, up to F and G1(wi)).
+    """
+    co = np.asarray(cos_o, np.float64)
+    alpha = np.asarray(alpha, np.float64)
+    e = np.asarray(eta, np.float64)
+    live = co > COS_EPS
+    co = np.clip(co, 0.0, 1.0)
+    g1 = _div(np.ones_like(co), np.where(live, co * (1.0 + smith_lambda(co, alpha)), 0.0))
+    # Reflection
+    wlo = np.clip(np.asarray(w_min, np.float64), -1.0, 1.0)
+    c_r = np.sqrt(0.5 * (1.0 + wlo))
+    d_r = ggx_d(np.sqrt(0.5 * (1.0 + np.clip(np.asarray(cos_r, np.float64), -1.0, 1.0))), alpha)
+    refl = fresnel_perp(c_r, e) * d_r * (0.25 * g1)
+    # Transmission: the range of c = wo·h
+    e2m1 = (e - 1.0) * (e + 1.0)
+    wc = -np.minimum(e, _div(np.ones_like(e), e))
+    sig = np.where(e > 1.0, -1.0, 1.0)
+
+    def half_cos(w: F64) -> F64:
+        w = np.minimum(np.clip(np.asarray(w, np.float64), -1.0, 1.0), wc)
+        v2 = (1.0 - e) * (1.0 - e) + 2.0 * e * (1.0 + w)
+        return np.clip(sig * (1.0 + e * w) / np.sqrt(v2), 0.0, 1.0)
+
+    c_hi, c_lo = half_cos(wlo), half_cos(w_max)
+    s_hi = np.sqrt(np.maximum(e2m1 + c_hi * c_hi, 0.0))
+    t_hi = c_hi * s_hi * (c_hi + s_hi) ** 2 / (e * e2m1 * e2m1)
+    # (i) θ_h ≥ θ_o − arccos(c_lo)
+    sin_o = np.sqrt(np.maximum(1.0 - co * co, 0.0))
+    sin_lo = np.sqrt(np.maximum(1.0 - c_lo * c_lo, 0.0))
+    c1 = np.where(c_lo > co, np.minimum(co * c_lo + sin_o * sin_lo, 1.0), 1.0)
+    # (ii) ∠(t, wi) ≤ K·θ_h
+    c_m = np.minimum(co, c_lo)
+    s_m = np.sqrt(np.maximum(e2m1 + c_m * c_m, 0.0))
+    k = _div(np.abs(c_m - s_m), s_m)
+    k2 = k * k
+    q = np.clip(np.asarray(cos_t, np.float64), -1.0, 1.0)
+    c_tan = _div((1.0 + q) * k2 - (1.0 - q), (1.0 + q) * k2 + (1.0 - q))
+    c_sin = 1.0 - _div(1.0 - q, k2)
+    c2 = np.where((s_m > 0.0) & (k > 0.0), np.where(k <= 1.0, c_tan, c_sin), 1.0)
+    trans = ggx_d(np.minimum(c1, c2), alpha) * t_hi * (1.0 - 0.5 * fresnel_perp(c_hi, e)) * g1
+    return np.where(live, refl, 0.0), np.where(live, trans, 0.0)

@@ -23,6 +23,7 @@ from ercuts_core.integrators.ercuts.light_tree import build_light_tree
 from ercuts_core.integrators.ercuts.lightcuts import cluster_bound, lightcut
 from ercuts_core.integrators.ercuts.stochastic_lightcuts import stochastic_cut, stochastic_lightcut
 from tests.test_glossy_bound import glossy_points
+from tests.test_rough_glass_bound import glass_points
 from tests.test_lightcuts import diffuse_points, room_scene
 from tests.vpl_cases import random_vpls
 
@@ -44,11 +45,12 @@ def test_numba_loads_and_is_the_default() -> None:
     assert kernels.enabled() == (os.environ.get(kernels.ENV) != "numpy")
 
 
-@pytest.mark.parametrize("kind", ["diffuse", "transmissive", "glossy"])
+@pytest.mark.parametrize("kind", ["diffuse", "transmissive", "glossy", "glass"])
 def test_bounds_match_numpy(kind: str) -> None:
     pos, nrm, inten = random_vpls(800, 3)
     tree = build_light_tree(pos, nrm, inten, seed=0)
     pts = (glossy_points(200, 5, diffuse_share=0.3) if kind == "glossy"
+           else glass_points(200, 5, diffuse_share=0.3) if kind == "glass"
            else diffuse_points(200, 5, transmissive=kind == "transmissive"))
     rng = np.random.default_rng(1)
     node = rng.integers(0, tree.n_nodes, 40000)
@@ -90,6 +92,18 @@ def test_lightcut_matches_numpy_at_glossy_receivers() -> None:
     pts = glossy_points(150, 40, diffuse_share=0.2)
     _same_cut(*both(lambda: lightcut(tree, pos, nrm, inten, pts, error_mode="total",
                                      return_cut=True)))
+
+
+def test_lightcut_matches_numpy_at_rough_glass_receivers() -> None:
+    """Rough glass points (their bound by kernels.bounds.glass_bounds) with Lambert points."""
+    pos, nrm, inten = random_vpls(1500, 6, scale=8.0, shift=-4.0)
+    tree = build_light_tree(pos, nrm, inten, seed=0)
+    pts = glass_points(150, 41, diffuse_share=0.2)
+    for mode in ("total", "bound"):
+        _same_cut(*both(lambda: lightcut(tree, pos, nrm, inten, pts, error_mode=mode,
+                                         return_cut=True)))
+    (pa, na), (pb, nb) = both(lambda: stochastic_cut(tree, pts, 32))
+    assert np.array_equal(pa, pb) and np.array_equal(na, nb)
 
 
 def test_lightcut_stopped_by_on_round_matches_numpy() -> None:

@@ -12,7 +12,11 @@ Its error is bounded by
 ``L̄_C = cosbound(x, n_x, box_C) · Ḡ_C · Y(f̄_x ⊙ I_C)`` (V̄ = 1; shared docs algorithm.md
 §E.2 (a)–(c)); leaves are exact.  At glossy receivers (:class:`GlossyReceivers`) the
 material factor cosbound·f̄_x is a per-cluster bound of the GGX lobe instead (the lobe's
-peak f̄_x is exceeded there, up to ∝ 1/(n·wo) at grazing angles).  Starting from the root, every cut node whose bound
+peak f̄_x is exceeded there, up to ∝ 1/(n·wo) at grazing angles), and at rough glass
+receivers of its reflection and transmission lobes (Walter et al. 2007;
+:func:`ercuts_core.bsdf.rough_glass_cosine_bound`: the lobe at normal incidence was exceeded
+×10³ toward the reflection peak at grazing views and ×1.5 on the transmission side,
+tests/test_rough_glass_bound.py).  Starting from the root, every cut node whose bound
 exceeds ``max_error`` × (the point's current total estimate) is replaced by its two
 children (Weber's law, 2 %), until no node qualifies or the cut holds ``max_cut_size``
 nodes.  The child that shares its parent's representative reuses M·G·V (scaled by
@@ -37,7 +41,7 @@ in W·sr⁻¹·m⁻²; luminance Y = 0.2126 R + 0.7152 G + 0.0722 B drives every
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Callable
 
 import numpy as np
@@ -45,7 +49,8 @@ from numpy.typing import NDArray
 
 from ... import kernels
 from ...arrays import take_rows
-from ...bsdf import COS_EPS, Bsdf, ggx_cosine_bound
+from ...bsdf import (COS_EPS, Bsdf, ggx_cosine_bound, refracted_direction,
+                     rough_glass_cosine_bound)
 from ...sampling import INV_PI
 from ...vecmath import dot
 from ...kernels import bounds as kernel_bounds
@@ -84,6 +89,20 @@ class GlossyReceivers:
     normal ``ShadingPoints.n`` is the lobe's shading normal (``mask`` is False
     otherwise; those points keep the constant ``f_bound``).
 
+    Points with a rough glass lobe (``glass``; Walter et al. 2007) add its reflection and
+    transmission bounds (:func:`ercuts_core.bsdf.rough_glass_cosine_bound`), each only where
+    the box reaches its side of the surface, with n the lobe's normal flipped to wo's side:
+
+        M̄ += [cosbound(x, n, B) > 0]·kr·refl + [cosbound(x, −n, B) > 0]·kt·trans,
+
+    with the four box cosines wo·wi ∈ [−scb(x, −wo, B), scb(x, wo, B)], scb(x, r, B) and
+    scb(x, t, B) (scb = :func:`signed_cosine_bound`, which may be negative; t the refraction
+    of wo about n).  The receiver
+    cosine |n·wi| of a transmissive point (``ShadingPoints.transmissive``) cancels the
+    1/|n·wi| of both lobes; at a point that is not transmissive (only max(0, n_x·wi) counts)
+    the same M̄ still bounds M.  The diffuse and opaque specular parts of such a point (a
+    partly transmitting Principled BSDF) use the upper side cosbound(x, n, B).
+
     Attributes:
         mask: (P,) bool, points whose per-cluster bound is used.
         r: (P,3) unit mirror directions of wo about the lobe's normal.
@@ -91,6 +110,14 @@ class GlossyReceivers:
         spec: (P,3) max(F0, F90) (0 where n·wo ≤ COS_EPS: no specular light at all).
         cos_o: (P,) n·wo.
         alpha: (P,) GGX alpha.
+        glass: (P,) bool, points of ``mask`` with a rough glass lobe (None: no such point).
+        ns: (P,3) the lobe's unit normal flipped to wo's side (glass points; else unused).
+        wo: (P,3) unit outgoing directions (glass points).
+        t: (P,3) unit refraction of wo about ``ns`` (−ns where wo is beyond the critical
+            angle; then unused).
+        eta: (P,) relative index η' = η_t/η_i of the glass lobe for this wo.
+        kr: (P,) glass reflection weight (1 − m)·t (0 where n·wo ≤ COS_EPS).
+        kt: (P,3) glass transmission weight (1 − m)·t·base (0 where n·wo ≤ COS_EPS).
     """
 
     mask: NDArray
@@ -99,6 +126,13 @@ class GlossyReceivers:
     spec: NDArray
     cos_o: NDArray
     alpha: NDArray
+    glass: NDArray | None = None
+    ns: NDArray | None = None
+    wo: NDArray | None = None
+    t: NDArray | None = None
+    eta: NDArray | None = None
+    kr: NDArray | None = None
+    kt: NDArray | None = None
 
     @classmethod
     def from_bsdf(cls, bsdf: Bsdf, wo: NDArray, n: NDArray) -> GlossyReceivers:
@@ -107,7 +141,8 @@ class GlossyReceivers:
 
         A point is in ``mask`` when its lobe is specular and ``n`` is the lobe's normal
         flipped to the side of wo (as in the G-buffer).  Where ``n`` is the opposite of the
-        lobe's normal, f·max(0, n·wi) = 0 for every wi and the specular bound is 0.
+        lobe's normal, f·max(0, n·wi) = 0 for every wi and the specular bound is 0 (at a
+        point without a glass lobe; with one, the glass bound covers both sides).
         """
         wo = np.asarray(wo, np.float64).reshape(-1, 3)
         n = np.asarray(n, np.float64).reshape(-1, 3)
@@ -116,13 +151,28 @@ class GlossyReceivers:
         align = dot(ns, n)
         cos_o = dot(wo, ns)
         # (a delta lobe is not a receiver: only its continuous part, the diffuse, is gathered)
-        # (nor a glass lobe: its bound is bsdf_max_value's)
-        mask = (~bsdf.is_diffuse & ~bsdf.delta & (bsdf.p_tr <= 0.0)
-                & (np.abs(align) >= 1.0 - 1e-12))   # equal up to rounding
+        aligned = ~bsdf.is_diffuse & ~bsdf.delta & (np.abs(align) >= 1.0 - 1e-12)   # up to rounding
+        has_glass = aligned & (bsdf.p_tr > 0.0)
+        mask = aligned & (bsdf.p_tr <= 0.0)
         lit = mask & (align > 0.0) & (cos_o > COS_EPS)
         spec = np.where(lit[:, None], np.maximum(bsdf.f0, bsdf.f90), 0.0)
         r = 2.0 * cos_o[:, None] * ns - wo
-        return cls(mask, r, bsdf.kd * INV_PI, spec, cos_o, np.asarray(bsdf.alpha, np.float64))
+        alpha = np.asarray(bsdf.alpha, np.float64)
+        if not has_glass.any():
+            return cls(mask, r, bsdf.kd * INV_PI, spec, cos_o, alpha)
+        # Rough glass points: both sides of the surface count (bounds per side)
+        lit_g = has_glass & (cos_o > COS_EPS)
+        spec = np.where(lit_g[:, None], np.maximum(bsdf.f0, bsdf.f90), spec)
+        eta = bsdf.eta_rel(wo)
+        t, _ = refracted_direction(wo, ns, eta)
+        return cls(mask | has_glass, r, bsdf.kd * INV_PI, spec, cos_o, alpha, glass=has_glass,
+                   ns=ns, wo=wo, t=t, eta=eta, kr=np.where(lit_g, bsdf.kr, 0.0),
+                   kt=np.where(lit_g[:, None], bsdf.kt, 0.0))
+
+    def subset(self, idx: NDArray) -> GlossyReceivers:
+        """The points ``idx`` (rows of every array field)."""
+        return GlossyReceivers(*(None if getattr(self, f.name) is None
+                                 else np.asarray(getattr(self, f.name))[idx] for f in fields(self)))
 
 
 @dataclass
@@ -239,6 +289,30 @@ def cosine_bound(x: NDArray, axis: NDArray, bmin: NDArray, bmax: NDArray) -> NDA
     return np.where(zmax > 0.0, zmax / np.where(den > 0.0, den, 1.0), 0.0)
 
 
+def signed_cosine_bound(x: NDArray, axis: NDArray, bmin: NDArray, bmax: NDArray) -> NDArray:
+    """Upper bound (K,) in [−1, 1] of cos∠(axis, y − x) over y ∈ [bmin, bmax], negative when
+    the whole box lies behind the plane ⊥ axis (where :func:`cosine_bound` says 0).
+
+    With v = y − x = z·axis + (tangential part ρ): z ≤ z_max over the box.  z_max > 0:
+    :func:`cosine_bound`'s value.  z_max < 0: z/√(z² + ρ²) increases with z and with ρ, so
+    cos ≤ z_max/√(z_max² + b_x² + b_y²), b = the largest |tangential| components over the
+    box.  All inputs (K,3) (``x`` may broadcast).
+    """
+    lo, hi = bmin - x, bmax - x
+    t, s = _frame(axis)
+    _, zmax = _range_along(axis, lo, hi)
+    xlo, xhi = _range_along(t, lo, hi)
+    ylo, yhi = _range_along(s, lo, hi)
+    ax, ay = _min_abs(xlo, xhi), _min_abs(ylo, yhi)
+    den = np.sqrt(ax * ax + ay * ay + zmax * zmax)
+    bx = np.maximum(np.abs(xlo), np.abs(xhi))
+    by = np.maximum(np.abs(ylo), np.abs(yhi))
+    far = np.sqrt(bx * bx + by * by + zmax * zmax)
+    pos = zmax / np.where(den > 0.0, den, 1.0)
+    neg = zmax / np.where(far > 0.0, far, 1.0)
+    return np.where(zmax > 0.0, pos, np.where(zmax < 0.0, neg, 0.0))
+
+
 def geometry_bound(x: NDArray, bmin: NDArray, bmax: NDArray, cone_axis: NDArray,
                    cone_cos: NDArray, clamp: float = 0.0) -> NDArray:
     """Upper bound Ḡ (K,) of max(0, n_i·(x − y_i)/|x − y_i|)/|x − y_i|² over a cluster.
@@ -274,19 +348,51 @@ def _receiver_cos_bound(pts: ShadingPoints, pidx: NDArray, bmin: NDArray,
 def _glossy_material_bound(pts: ShadingPoints, pidx: NDArray, bmin: NDArray, bmax: NDArray,
                            cb: NDArray, inten: NDArray, m: NDArray) -> NDArray:
     """``m`` (K,) with the entries at glossy points replaced by Y(M̄ ⊙ I_C), M̄ the
-    per-cluster material bound of :class:`GlossyReceivers` (only those entries computed)."""
+    per-cluster material bound of :class:`GlossyReceivers` (only those entries computed;
+    rough glass points by :func:`_glass_material_bound`)."""
     gl = pts.glossy
-    k = np.flatnonzero(np.asarray(gl.mask, bool)[pidx])
-    if k.size == 0:
+    sel = np.asarray(gl.mask, bool)[pidx]
+    kg = np.zeros(0, np.int64)
+    if gl.glass is not None:
+        glass = np.asarray(gl.glass, bool)[pidx]
+        kg, sel = np.flatnonzero(glass), sel & ~glass
+    k = np.flatnonzero(sel)
+    if k.size == 0 and kg.size == 0:
         return m
-    q = pidx[k]
-    cos_r = cosine_bound(take_rows(pts.p, q), take_rows(gl.r, q), bmin[k], bmax[k])
-    s = ggx_cosine_bound(gl.cos_o[q], gl.alpha[q], cos_r)
-    s = np.where(cb[k] > 0.0, s, 0.0)
-    mb = cb[k, None] * take_rows(gl.kd_pi, q) + s[:, None] * take_rows(gl.spec, q)
     m = m.copy()
-    m[k] = luminance(mb * inten[k])
+    if k.size:
+        q = pidx[k]
+        cos_r = cosine_bound(take_rows(pts.p, q), take_rows(gl.r, q), bmin[k], bmax[k])
+        s = ggx_cosine_bound(gl.cos_o[q], gl.alpha[q], cos_r)
+        s = np.where(cb[k] > 0.0, s, 0.0)
+        mb = cb[k, None] * take_rows(gl.kd_pi, q) + s[:, None] * take_rows(gl.spec, q)
+        m[k] = luminance(mb * inten[k])
+    if kg.size:
+        m[kg] = luminance(_glass_material_bound(gl, take_rows(pts.p, pidx[kg]), pidx[kg], bmin[kg],
+                                                bmax[kg]) * inten[kg])
     return m
+
+
+def _glass_material_bound(gl: GlossyReceivers, x: NDArray, q: NDArray, bmin: NDArray,
+                          bmax: NDArray) -> NDArray:
+    """M̄ (K,3) [1/sr] of rough glass points ``q`` (K,) at positions x (K,3) over the boxes
+    [bmin, bmax] (K,3): the sum in :class:`GlossyReceivers` (diffuse, opaque specular, glass
+    reflection on the side of ``ns``, glass transmission on the other side)."""
+    n, wo = take_rows(gl.ns, q), take_rows(gl.wo, q)
+    cb_up = cosine_bound(x, n, bmin, bmax)
+    cb_dn = cosine_bound(x, -n, bmin, bmax)
+    w_max = signed_cosine_bound(x, wo, bmin, bmax)
+    w_min = -signed_cosine_bound(x, -wo, bmin, bmax)
+    cos_r = signed_cosine_bound(x, take_rows(gl.r, q), bmin, bmax)
+    cos_t = signed_cosine_bound(x, take_rows(gl.t, q), bmin, bmax)
+    cos_o, alpha = gl.cos_o[q], gl.alpha[q]
+    refl, trans = rough_glass_cosine_bound(cos_o, alpha, gl.eta[q], w_min, w_max, cos_r, cos_t)
+    up = cb_up > 0.0
+    s = np.where(up, ggx_cosine_bound(cos_o, alpha, cos_r), 0.0)
+    refl = np.where(up, refl, 0.0)
+    trans = np.where(cb_dn > 0.0, trans, 0.0)
+    return (cb_up[:, None] * take_rows(gl.kd_pi, q) + s[:, None] * take_rows(gl.spec, q)
+            + (refl * gl.kr[q])[:, None] + trans[:, None] * take_rows(gl.kt, q))
 
 
 def cluster_bound(tree: LightTree, node: NDArray, pts: ShadingPoints, pidx: NDArray,
@@ -315,14 +421,25 @@ def cluster_bound(tree: LightTree, node: NDArray, pts: ShadingPoints, pidx: NDAr
 def _cluster_bound_compiled(tree: LightTree, node: NDArray, pts: ShadingPoints, pidx: NDArray,
                             clamp: float) -> NDArray:
     """:func:`cluster_bound` by :func:`ercuts_core.kernels.bounds.cluster_bounds` (one pass
-    per entry); glossy entries are then recomputed with their per-cluster material bound."""
+    per entry); glossy entries are then recomputed with their per-cluster material bound
+    (rough glass entries by :func:`ercuts_core.kernels.bounds.glass_bounds`, the others with
+    numpy)."""
     node = np.asarray(node, np.int64)
     pidx = np.asarray(pidx, np.int64)
     bound, cb = kernel_bounds.cluster_bounds(pidx, node, *_point_arrays(pts), *_tree_arrays(tree),
                                              float(clamp))
-    if pts.glossy is None:
+    gl = pts.glossy
+    if gl is None:
         return bound
-    k = np.flatnonzero(np.asarray(pts.glossy.mask, bool)[pidx])
+    sel = np.asarray(gl.mask, bool)[pidx]
+    if gl.glass is not None:
+        glass = np.asarray(gl.glass, bool)[pidx]
+        sel &= ~glass
+        kg = np.flatnonzero(glass)
+        if kg.size:
+            bound[kg] = kernel_bounds.glass_bounds(pidx[kg], node[kg], *_glass_arrays(pts),
+                                                   *_tree_arrays(tree), float(clamp))
+    k = np.flatnonzero(sel)
     if k.size == 0:
         return bound
     nk, pk = node[k], pidx[k]
@@ -333,6 +450,14 @@ def _cluster_bound_compiled(tree: LightTree, node: NDArray, pts: ShadingPoints, 
                        take_rows(tree.cone_cos, nk), clamp)
     bound[k] = m * np.where(m > 0.0, g, 0.0)
     return bound
+
+
+def _glass_arrays(pts: ShadingPoints) -> tuple:
+    """The arrays of :func:`ercuts_core.kernels.bounds.glass_bounds` (contiguous float64)."""
+    gl = pts.glossy
+    return tuple(np.ascontiguousarray(a, np.float64) for a in
+                 (pts.p, gl.ns, gl.wo, gl.r, gl.t, gl.cos_o, gl.alpha, gl.eta, gl.kd_pi, gl.spec,
+                  gl.kr, gl.kt))
 
 
 def _point_arrays(pts: ShadingPoints) -> tuple:

@@ -118,10 +118,7 @@ def shared_cut(tree: LightTree, pts: ShadingPoints, ref: NDArray, cut_size: int,
 
 def _subset(pts: ShadingPoints, idx: NDArray) -> ShadingPoints:
     """The points ``idx`` of ``pts`` for the bounds (the callbacks are not used by the cut)."""
-    glossy = pts.glossy
-    if glossy is not None:
-        glossy = type(glossy)(*(np.asarray(getattr(glossy, f))[idx] for f in
-                                ("mask", "r", "kd_pi", "spec", "cos_o", "alpha")))
+    glossy = None if pts.glossy is None else pts.glossy.subset(idx)
     tr = None if pts.transmissive is None else np.asarray(pts.transmissive)[idx]
     return ShadingPoints(pts.p[idx], pts.n[idx], pts.wo[idx], pts.f_bound[idx], pts.eval_f,
                          pts.visible, transmissive=tr, glossy=glossy)

@@ -20,9 +20,11 @@ _thread: threading.Thread | None = None
 
 
 def _compile() -> None:
-    """Call every kernel once on a tiny case (200 VPLs over 64 points): numba compiles them."""
+    """Call every kernel once on a tiny case (200 VPLs over 64 points, half of them rough
+    glass for :func:`ercuts_core.kernels.bounds.glass_bounds`): numba compiles them."""
+    from ...bsdf import Bsdf
     from .light_tree import build_light_tree
-    from .lightcuts import ShadingPoints, lightcut
+    from .lightcuts import GlossyReceivers, ShadingPoints, lightcut
     from .stochastic_lightcuts import stochastic_lightcut
 
     rng = np.random.default_rng(0)
@@ -37,6 +39,12 @@ def _compile() -> None:
     for mode in ("total", "bound", "literal"):
         lightcut(tree, pos, nrm, inten, pts, error_mode=mode)
     stochastic_lightcut(tree, pos, nrm, inten, pts, np.random.default_rng(1), cut_size=8)
+    glass = Bsdf.from_params(np.full((64, 3), 0.8), 0.3, 0.0, 0.5, up, up,
+                             transmission=np.arange(64) % 2, ior=1.5)
+    wo = np.tile([0.6, 0.0, 0.8], (64, 1))
+    lightcut(tree, pos, nrm, inten, ShadingPoints(x, up, wo, f, lambda i, wi: glass.subset(i).eval(wo[i], wi),
+                                                  pts.visible, transmissive=np.arange(64) % 2 == 1,
+                                                  glossy=GlossyReceivers.from_bsdf(glass, wo, up)))
 
 
 def start() -> None:

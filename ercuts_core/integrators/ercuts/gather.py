@@ -18,8 +18,8 @@ from numpy.typing import NDArray
 from ...sampling import luminance
 from ...scene import BuiltScene
 from ...settings import RenderSettings
-from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
 from .balance import DirectRival, PassVariance
+from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
 from .pacing import MAX_PACED_ERROR, GatherPace, Schedule
 from .stochastic_lightcuts import leaf_cdf, stochastic_lightcut
 from .vpl import GBuffer

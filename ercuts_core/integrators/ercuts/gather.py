@@ -155,7 +155,7 @@ class Gather:
         mean over 1 or 2 passes is too. Returns the mean (2, Q, 3) and the passes made
         (fractional for a cut-short last one)."""
         s, n_pts, S = self.settings, len(sweep.pts_all), self.g.samples
-        n_pixels = self.scene.camera.window.n_pixels
+        n_pixels = len(self.g.pixel) // S
         total, count, passes = L.copy(), np.ones(len(self.g.pixel)), 1.0
         spread = PassVariance(n_pixels)
         spread.add(_pixel_luminance(L, n_pixels, S))

@@ -97,7 +97,7 @@ class BuiltScene:
         self.has_delta = _has_delta(desc.materials, self.tri_mat)
         #: Some triangle's material may be a mirror, glass or a polished metal
         #: (``Bsdf.is_specular_or_glass``; conservative: any transmission, any metal below
-        #: roughness 0.5, any shading program): ERCUTS's gather follows the camera through them.
+        #: roughness 0.5, programmed or not): ERCUTS's gather follows the camera through them.
         self.has_specular_or_glass = self.has_delta or _maybe_specular_or_glass(desc.materials, self.tri_mat)
 
     def intersect(self, o: NDArray, d: NDArray, tmax=None) -> Surface:
@@ -187,13 +187,15 @@ class BuiltScene:
 
 def _maybe_specular_or_glass(mats, tri_mat: NDArray) -> bool:
     """True when some triangle's material may be glass or a polished metal (conservative: it
-    transmits, or is metallic below roughness ``SHARP_ROUGHNESS``, or has a shading program)."""
+    transmits, or is metallic below roughness ``SHARP_ROUGHNESS`` — a program's output of
+    those counting as such)."""
     used = np.unique(tri_mat)
     used = used[(used >= 0) & (used < mats.n_materials)]
-    if mats.has_programs and any(mats.programs[i] for i in used):
-        return True
-    metal = (np.asarray(mats.metallic)[used] > 0) & (np.asarray(mats.roughness)[used] < SHARP_ROUGHNESS)
-    return bool((np.asarray(mats.transmission)[used] > 0).any() or metal.any())
+    prog = [mats.programs[i] if mats.has_programs else "" for i in used]
+    glass = (np.asarray(mats.transmission)[used] > 0) | np.array(['"transmission"' in p for p in prog], bool)
+    metal = (np.asarray(mats.metallic)[used] > 0) | np.array(['"metallic"' in p for p in prog], bool)
+    sharp = (np.asarray(mats.roughness)[used] < SHARP_ROUGHNESS) | np.array(['"roughness"' in p for p in prog], bool)
+    return bool((glass | (metal & sharp)).any())
 
 
 def _has_delta(mats, tri_mat: NDArray) -> bool:

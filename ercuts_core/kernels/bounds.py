@@ -49,14 +49,20 @@ def _range_max(d0, d1, d2, lo0, lo1, lo2, hi0, hi1, hi2) -> float:
 
 
 @jit
-def cosine_bound1(n0, n1, n2, lo0, lo1, lo2, hi0, hi1, hi2) -> float:
-    """Upper bound of max(0, cos∠(n, v)) over v in the box [lo, hi] (box relative to the
-    point; Walter's box-in-axis-frame bound, lightcuts.cosine_bound for one pair)."""
+def _frame(n0, n1, n2):
+    """Two unit vectors t, s completing the unit n to an orthonormal frame (Duff et al. 2017,
+    the branchless basis of ``sampling.coordinate_system``)."""
     sign = 1.0 if n2 >= 0.0 else -1.0
     a = -1.0 / (sign + n2)
     b = n0 * n1 * a
-    t0, t1, t2 = 1.0 + sign * n0 ** 2 * a, sign * b, -sign * n0
-    s0, s1, s2 = b, sign + n1 ** 2 * a, -n1
+    return 1.0 + sign * n0 ** 2 * a, sign * b, -sign * n0, b, sign + n1 ** 2 * a, -n1
+
+
+@jit
+def cosine_bound1(n0, n1, n2, lo0, lo1, lo2, hi0, hi1, hi2) -> float:
+    """Upper bound of max(0, cos∠(n, v)) over v in the box [lo, hi] (box relative to the
+    point; Walter's box-in-axis-frame bound, lightcuts.cosine_bound for one pair)."""
+    t0, t1, t2, s0, s1, s2 = _frame(n0, n1, n2)
     zmax = _range_max(n0, n1, n2, lo0, lo1, lo2, hi0, hi1, hi2)
     ax = _min_abs(_range_min(t0, t1, t2, lo0, lo1, lo2, hi0, hi1, hi2),
                   _range_max(t0, t1, t2, lo0, lo1, lo2, hi0, hi1, hi2))
@@ -72,11 +78,7 @@ def cosine_bound1(n0, n1, n2, lo0, lo1, lo2, hi0, hi1, hi2) -> float:
 def signed_cosine_bound1(n0, n1, n2, lo0, lo1, lo2, hi0, hi1, hi2) -> float:
     """Upper bound of cos∠(n, v) over v in the box [lo, hi], negative when the box lies behind
     the plane ⊥ n (lightcuts.signed_cosine_bound for one pair)."""
-    sign = 1.0 if n2 >= 0.0 else -1.0
-    a = -1.0 / (sign + n2)
-    b = n0 * n1 * a
-    t0, t1, t2 = 1.0 + sign * n0 ** 2 * a, sign * b, -sign * n0
-    s0, s1, s2 = b, sign + n1 ** 2 * a, -n1
+    t0, t1, t2, s0, s1, s2 = _frame(n0, n1, n2)
     zmax = _range_max(n0, n1, n2, lo0, lo1, lo2, hi0, hi1, hi2)
     xlo = _range_min(t0, t1, t2, lo0, lo1, lo2, hi0, hi1, hi2)
     xhi = _range_max(t0, t1, t2, lo0, lo1, lo2, hi0, hi1, hi2)

@@ -154,7 +154,7 @@ def cycles_rate(scene: str, w: int, h: int) -> float:
     if os.path.exists(path):
         with open(path) as fh:
             return json.load(fh)["samples_per_second"]
-    rate = cycles_runner.calibrate(scene, w, h, samples=32)
+    rate = cycles_runner.calibrate(scene, w, h, samples=128)  # 32 left start-up in the rate
     os.makedirs(os.path.dirname(path), exist_ok=True)
     with open(path, "w") as fh:
         json.dump(dict(samples_per_second=rate, measured=_now()), fh)

@@ -30,7 +30,7 @@ from cycles_stats import INJECT, compare, render_seeds
 
 pytestmark = pytest.mark.slow
 V = bpy.app.version
-PANEL = dict(samples=32, cycles_samples=128, max_depth=6, size=(48, 36))
+PANEL = dict(samples=32, cycles_samples=128, max_depth=6)
 COLOR = (0.8, 0.55, 0.3, 1.0)
 
 
@@ -53,9 +53,22 @@ def _skip_on_3x(integrator):
                     "Cycles differs, which PATH and BDPT compare)")
 
 
-@pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
+#: Measured (bpy 5.0.1, seeds 1–4, 64×48, 8×8 blocks): the floor in front of the panel, lit by
+#: the light the panel lets through, is 5–11 % darker in ERCUTS than in Cycles (block z −4 to
+#: −7 along the bottom block row; image mean −0.5 %, χ² p 3·10⁻¹⁷, max |z| 6.9). Not the VPL
+#: clamp (clamp 0: the same), not the cuts (brute-force gather: the same), not the chains'
+#: mutations (chain length 1: the same); an opaque diffuse panel and a translucent panel lit
+#: from the camera's side pass (z² 1.39 and 0.83). Cause not found yet (README, Known
+#: limitations); PATH and BDPT agree with Cycles.
+_ERCUTS_DARK_FLOOR = ("ERCUTS renders the floor lit through a back-lit translucent panel 5–11 % "
+                      "dark (cause open; see _ERCUTS_DARK_FLOOR's comment)")
+
+
+@pytest.mark.parametrize("integrator", [
+    "PATH", "BDPT",
+    pytest.param("ERCUTS", marks=pytest.mark.xfail(V >= (4, 0, 0), strict=True, reason=_ERCUTS_DARK_FLOOR))])
 def test_backlit_translucent_panel_agrees_with_cycles(tmp_path, integrator):
-    """(numbers: see the module docstring's report in the README)"""
+    """Block means of four seeds per engine against Cycles' (``cycles_stats.compare``)."""
     _skip_on_3x(integrator)
     backlit_panel_scene()
     e, c = render_seeds(tmp_path, "translucent_panel", integrator, **PANEL)

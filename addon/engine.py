@@ -161,7 +161,10 @@ class ErcutsRenderEngine(bpy.types.RenderEngine):
             self.update_stats("Ercuts", f"Error: {error_message(exc)}")
 
     def __del__(self):
-        session = getattr(self, "_viewport_session", None)
+        try:
+            session = getattr(self, "_viewport_session", None)
+        except ReferenceError:      # bpy 5 may free the engine's RNA first: nothing to stop
+            return
         if session is not None:     # a viewport engine is freed: stop its render thread
             session.stop()
 

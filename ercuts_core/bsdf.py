@@ -45,6 +45,20 @@ reflection; camera (radiance) transport through a refraction carries 1/η_rel²,
 kd = o(1 − F0_d)·base, F0 = o·F0_d + m·base, F90 = o·F0_d + m, and the selection
 probabilities are s, d, tw normalised by s + d + tw.
 
+Translucency (Cycles' Translucent BSDF, kernel ``bsdf_translucent``): a diffuse *transmission*
+lobe f_dt = kdt/π for wo and wi on opposite sides of the surface (strictly below the flipped ns
+and ng, as the glass lobe's transmission), sampled cosine-weighted about −ns (pdf |ns·wi|/π).
+It is symmetric in wo and wi (reciprocal: f(wo, wi) = f(wi, wo)) and has no η factor, so the
+adjoint is the same function; no bump shadowing. Its weight tl ∈ [0, 1] (``translucency``)
+takes its share from the opaque dielectric layer *additively* beside the transmission weight:
+with tl' = min(tl, 1 − t) the layers are metal m, glass (1 − m)·t, translucent (1 − m)·tl' and
+opaque (1 − m)(1 − t − tl'), kdt = (1 − m)·tl'·base. Additive shares make the exporter's
+linear parameter blends exact for mixes of Diffuse, Glass and Translucent BSDFs of one colour
+(Mix(Glass, Translucent, f): t = 1 − f, tl = f; a product (1 − t)(1 − tl) would give the
+translucent lobe only f²). Its selection probability is d_t/(s + d + tw + d_t), d_t =
+(1 − m)·tl'·Y(base), like the diffuse lobe's; u0 picks, in order, specular [0, p_spec), diffuse,
+translucent [1 − p_tr − p_dt, 1 − p_tr) and glass [1 − p_tr, 1).
+
 Delta lobes: where α = roughness² ≤ ``DELTA_ALPHA`` (Cycles' singular threshold) the specular
 lobe is a perfect mirror (Schlick F at wo·n, direction reflected about ns) and the glass lobe a
 smooth interface; both are left out of ``eval``/``pdf`` and reached only by ``sample``, which
@@ -126,13 +140,14 @@ def _oriented_normals(ns: ArrayLike, ng: ArrayLike) -> tuple[F64, F64]:
 
 def _lobe_params(base_color: ArrayLike, roughness: ArrayLike, metallic: ArrayLike,
                  specular: ArrayLike, n: int, transmission: ArrayLike = 0.0,
-                 ior: ArrayLike = DEFAULT_IOR) -> dict[str, NDArray]:
+                 ior: ArrayLike = DEFAULT_IOR, translucency: ArrayLike = 0.0) -> dict[str, NDArray]:
     """Per-lane lobe weights of :class:`Bsdf` from Principled parameters broadcast to n lanes.
 
-    Returns the fields kd, f0, f90, kt (n, 3), alpha, p_spec, p_tr, kr, eta (n,), is_diffuse,
-    delta (n,) bool (formulas in the module docstring). Layering as Cycles' Principled BSDF
-    (4.x): a metallic fraction m, a transmission fraction (1 − m)·t (the dielectric lobe)
-    and the opaque dielectric (1 − m)(1 − t) (diffuse + specular F0_d).
+    Returns the fields kd, f0, f90, kt, kdt (n, 3), alpha, p_spec, p_tr, p_dt, kr, eta (n,),
+    is_diffuse, delta (n,) bool (formulas in the module docstring). Layering as Cycles'
+    Principled BSDF (4.x): a metallic fraction m, a transmission fraction (1 − m)·t (the
+    dielectric lobe), a translucent fraction (1 − m)·tl' (tl' = min(tl, 1 − t)) and the
+    opaque dielectric (1 − m)(1 − t − tl') (diffuse + specular F0_d).
     """
     base = np.broadcast_to(np.clip(np.asarray(base_color, np.float64), 0.0, 1.0), (n, 3))
     r_raw = np.broadcast_to(np.clip(np.asarray(roughness, np.float64), 0.0, 1.0), (n,))
@@ -140,24 +155,34 @@ def _lobe_params(base_color: ArrayLike, roughness: ArrayLike, metallic: ArrayLik
     spec = np.broadcast_to(np.asarray(specular, np.float64), (n,))
     trans = np.broadcast_to(np.clip(np.asarray(transmission, np.float64), 0.0, 1.0), (n,))
     eta = np.broadcast_to(np.clip(np.asarray(ior, np.float64), IOR_MIN, IOR_MAX), (n,))
+    # translucency's share, beside the transmission's (module docstring): t + tl' ≤ 1
+    tl = np.minimum(np.broadcast_to(np.clip(np.asarray(translucency, np.float64), 0.0, 1.0), (n,)),
+                    1.0 - trans)
     f0_d = np.clip(0.08 * spec, 0.0, 1.0)
-    opaque = (1.0 - metal) * (1.0 - trans)          # weight of the opaque dielectric layer
+    opaque = (1.0 - metal) * (1.0 - trans - tl)     # weight of the opaque dielectric layer
     m, o = metal[:, None], opaque[:, None]
     kd = o * (1.0 - f0_d)[:, None] * base
     f0 = o * f0_d[:, None] + m * base
     f90 = o * f0_d[:, None] + m
     tw = (1.0 - metal) * trans                      # weight of the dielectric (glass) lobe
     kt = tw[:, None] * base                         # its transmission tint (reflection: white)
-    # Lobe-selection probabilities p_spec = s/(s + d + tw), p_tr = tw/(s + d + tw)
+    tlw = (1.0 - metal) * tl                        # weight of the translucent lobe
+    kdt = tlw[:, None] * base
+    # Lobe-selection probabilities p_spec = s/total, p_tr = tw/total, p_dt = dt/total,
+    # total = s + d + tw + dt (dt = 0 without translucency: the sums are unchanged bit for bit)
     s = opaque * f0_d + metal
-    d = opaque * (1.0 - f0_d) * luminance(base)
-    total = s + d + tw
+    y = luminance(base)
+    d = opaque * (1.0 - f0_d) * y
+    dt = tlw * y
+    total = s + d + tw + dt
     p_spec = np.clip(_div(s, total), 0.0, 1.0)
     p_tr = np.clip(_div(tw, total), 0.0, 1.0 - p_spec)
+    p_dt = np.clip(_div(dt, total), 0.0, np.maximum(1.0 - p_spec - p_tr, 0.0))
     alpha = r_raw * r_raw
     return {"kd": kd, "f0": f0, "f90": f90, "alpha": np.maximum(alpha, ALPHA_MIN),
             "p_spec": p_spec, "is_diffuse": (s <= 0.0) & (tw <= 0.0), "kt": kt,
-            "p_tr": p_tr, "kr": np.array(tw), "eta": np.array(eta), "delta": alpha <= DELTA_ALPHA}
+            "p_tr": p_tr, "kr": np.array(tw), "eta": np.array(eta), "delta": alpha <= DELTA_ALPHA,
+            "kdt": kdt, "p_dt": p_dt}
 
 
 # ---------------------------------------------------------------------------------------
@@ -288,7 +313,8 @@ class Bsdf:
         f90: (N, 3) Schlick F90 = lerp(F0_d, 1, metallic).
         alpha: (N,) GGX alpha = max(roughness², 1e-3).
         p_spec: (N,) probability of sampling the specular lobe.
-        is_diffuse: (N,) bool, True where the lane has no specular or glass lobe.
+        is_diffuse: (N,) bool, True where the lane has no specular or glass lobe (it may have
+            a translucent one: ``kdt``).
         kt: (N, 3) glass-lobe weight (1 − metallic)·transmission·base (the transmission tint;
             the glass lobe's reflection has weight (1 − metallic)·transmission, untinted).
         p_tr: (N,) probability of sampling the glass lobe.
@@ -296,6 +322,9 @@ class Bsdf:
         eta: (N,) index of refraction of the side ``ng`` points away from (η outside = 1).
         delta: (N,) bool, the specular and glass lobes are perfectly smooth (delta lobes, not
             part of eval/pdf; only ``sample`` produces their directions).
+        kdt: (N, 3) translucent (diffuse transmission) weight (1 − metallic)·tl'·base;
+            f = kdt/π for wo and wi on opposite sides (module docstring).
+        p_dt: (N,) probability of sampling the translucent lobe.
         n_smooth: (N, 3) unit smooth normals before a normal map/bump (on ``ng``'s side) and
         shadowing: (N,) int bump-shadowing model codes (:mod:`ercuts_core.bump_shadowing`),
             both None when no lane has one: the diffuse value kd/π is multiplied by
@@ -316,6 +345,8 @@ class Bsdf:
     kr: F64
     eta: F64
     delta: B
+    kdt: F64
+    p_dt: F64
     n_smooth: F64 | None = None
     shadowing: NDArray | None = None
 
@@ -325,7 +356,7 @@ class Bsdf:
     def from_params(cls, base_color: ArrayLike, roughness: ArrayLike, metallic: ArrayLike,
                     specular: ArrayLike, ns: ArrayLike, ng: ArrayLike, n_smooth: ArrayLike | None = None,
                     shadowing: ArrayLike | None = None, transmission: ArrayLike = 0.0,
-                    ior: ArrayLike = DEFAULT_IOR) -> Bsdf:
+                    ior: ArrayLike = DEFAULT_IOR, translucency: ArrayLike = 0.0) -> Bsdf:
         """Build from per-lane Principled parameters (broadcast to the N lanes of the normals).
 
         Args:
@@ -336,9 +367,11 @@ class Bsdf:
             n_smooth, shadowing: bump shadowing (class docstring), or None.
             transmission: (N,) Principled transmission weight in [0, 1] (1: glass).
             ior: (N,) index of refraction (clipped to [1.0001, 10]).
+            translucency: (N,) weight of the translucent lobe in [0, 1] (1: a Translucent BSDF).
         """
         ns, ng = _oriented_normals(ns, ng)
-        lobes = _lobe_params(base_color, roughness, metallic, specular, ng.shape[0], transmission, ior)
+        lobes = _lobe_params(base_color, roughness, metallic, specular, ng.shape[0], transmission, ior,
+                             translucency)
         if n_smooth is not None and shadowing is not None:
             lobes.update(n_smooth=_oriented_normals(n_smooth, ng)[0],
                          shadowing=np.asarray(shadowing, np.int8).reshape(-1))
@@ -357,7 +390,7 @@ class Bsdf:
         rows = _lobe_params(table.base_color.astype(np.float64), table.roughness.astype(np.float64),
                             table.metallic.astype(np.float64), table.specular.astype(np.float64),
                             len(table.roughness), table.transmission.astype(np.float64),
-                            table.ior.astype(np.float64))
+                            table.ior.astype(np.float64), table.translucency.astype(np.float64))
         return cls(ns=ns, ng=ng, **{k: take_rows(v, idx) for k, v in rows.items()})
 
     def __len__(self) -> int:
@@ -389,22 +422,38 @@ class Bsdf:
         return bool(((self.p_tr > 0.0) & ~self.delta).any())
 
     @cached_property
+    def translucent(self) -> B:
+        """(N,) bool: the lane has a translucent (diffuse transmission) lobe."""
+        return self.kdt.max(axis=1) > 0.0
+
+    @cached_property
+    def has_translucent(self) -> bool:
+        """True when some lane has a translucent lobe."""
+        return bool(self.translucent.any())
+
+    @cached_property
+    def reflect_only(self) -> B:
+        """(N,) bool: no lobe of the lane transmits (no glass, no translucent lobe), so f = 0
+        unless wo and wi lie on one side of the surface."""
+        return (self.p_tr <= 0.0) & ~self.translucent
+
+    @cached_property
     def is_delta(self) -> B:
         """(N,) bool: every lobe of the lane is a delta lobe (a perfect mirror, smooth glass):
         eval and pdf are 0 for every direction, so no connection or light sample can reach it."""
         smooth = self.delta | ((self.p_spec <= 0.0) & (self.p_tr <= 0.0))
-        return smooth & ~self.is_diffuse & (self.kd.max(axis=1) <= 0.0)
+        return smooth & ~self.is_diffuse & (self.kd.max(axis=1) <= 0.0) & ~self.translucent
 
     @cached_property
     def is_specular_or_glass(self) -> B:
-        """(N,) bool: the lane has no diffuse part and every lobe is a delta lobe
+        """(N,) bool: the lane has no diffuse or translucent part and every lobe is a delta lobe
         (:attr:`is_delta`), the glass lobe (a smooth or rough dielectric interface), or a
         sharp reflection lobe (roughness below :data:`SHARP_ROUGHNESS`): a mirror, glass or a
         polished metal. No VPL can shine through glass, and VPLs gathered at (or standing on) a
         sharp lobe are dominated by rare peaks (a glossy floor of roughness 0.1 rendered ×3),
         so ERCUTS's gather follows the camera through such a surface
         (``vpl.follow_specular``) and its chains leave it out."""
-        no_diffuse = self.kd.max(axis=1) <= 0.0
+        no_diffuse = (self.kd.max(axis=1) <= 0.0) & ~self.translucent   # diffuse nor translucent
         glass = (self.p_tr > 0.0) & (self.p_spec <= 0.0)
         sharp = (self.p_spec > 0.0) & (self.p_tr <= 0.0) & (self.alpha < SHARP_ROUGHNESS ** 2)
         return self.is_delta | (no_diffuse & (glass | sharp))
@@ -438,7 +487,12 @@ class Bsdf:
         if self.all_diffuse:
             # Lambert only: f = kd/π, pdf = cos_i/π on the valid set (see all_diffuse).
             w = np.where(valid, inv_pi, 0.0)          # kd ≥ 0 finite: kd·0 = +0 exactly
-            return self.kd * w[:, None], np.where(valid, cos_i * INV_PI, 0.0), cos_i, valid
+            f, pdf = self.kd * w[:, None], np.where(valid, cos_i * INV_PI, 0.0)
+            if self.has_translucent:
+                # Lambert and translucent: the diffuse lobe is chosen with 1 − p_dt
+                f_t, pdf_t, valid_t = self._translucent(wo, wi, ns, ng, cos_o, cos_i)
+                f, pdf, valid = f + f_t, pdf * (1.0 - self.p_dt) + pdf_t, valid | valid_t
+            return f, pdf, cos_i, valid
         # Half vector terms; wo + wi is computed the same way for (wo, wi) and (wi, wo)
         h_len = np.sqrt(dot(wo + wi, wo + wi))
         cos_h = np.clip(_div(cos_o + cos_i, h_len), 0.0, 1.0)
@@ -454,12 +508,27 @@ class Bsdf:
         # Mixture pdf of sample(): VNDF reflection pdf G1(wo) D / (4 cos_o) and cos/π
         pdf_spec = _div(D / (1.0 + lam_o), np.where(valid & ~self.delta, 4.0 * cos_o, 0.0))
         pdf_diff = np.maximum(cos_i, 0.0) * INV_PI
-        p_diff = np.maximum(1.0 - self.p_spec - self.p_tr, 0.0)
+        p_diff = np.maximum(1.0 - self.p_spec - self.p_tr - self.p_dt, 0.0)
         pdf = np.where(valid, self.p_spec * pdf_spec + p_diff * pdf_diff, 0.0)
         if self.has_rough_glass:
             f_g, pdf_g, valid_g = self._rough_glass(wo, wi, ns, ng, cos_o, cos_i, adjoint)
             f, pdf, valid = f + f_g, pdf + self.p_tr * pdf_g, valid | valid_g
+        if self.has_translucent:
+            f_t, pdf_t, valid_t = self._translucent(wo, wi, ns, ng, cos_o, cos_i)
+            f, pdf, valid = f + f_t, pdf + pdf_t, valid | valid_t
         return f, pdf, cos_i, valid
+
+    def _translucent(self, wo: F64, wi: F64, ns: F64, ng: F64, cos_o: F64,
+                     cos_i: F64) -> tuple[F64, F64, B]:
+        """The translucent lobe (Cycles' ``bsdf_translucent``): f = kdt/π (N, 3), its share of
+        the mixture pdf p_dt·|cos_i|/π (N,) and validity, where wo is above and wi strictly below
+        the flipped normals ns and ng (a refraction's side test, as the rough glass lobe's).
+        Symmetric in (wo, wi) and the same in both transport directions (no η factor)."""
+        ok = (self.translucent & (cos_o > COS_EPS) & (dot(wo, ng) > COS_EPS)
+              & (cos_i < -COS_EPS) & (dot(wi, ng) < -COS_EPS))
+        f = np.where(ok[:, None], self.kdt * INV_PI, 0.0)
+        pdf = np.where(ok, self.p_dt * (-cos_i) * INV_PI, 0.0)
+        return f, pdf, ok
 
     def _rough_glass(self, wo: F64, wi: F64, ns: F64, ng: F64, cos_o: F64, cos_i: F64,
                      adjoint: bool) -> tuple[F64, F64, B]:
@@ -545,6 +614,11 @@ class Bsdf:
                     below = (u[:, 0] < self.p_spec) & (wi_l[:, 2] <= 0.0)
                     wi_l = np.where(below[:, None], 0.0, wi_l)
                     wi_l = self._sample_rough_glass(wo, wo_l, m, u[:, 0], wi_l)
+            if self.has_translucent:
+                # translucent lanes (u0 in [1 − p_tr − p_dt, 1 − p_tr)): the cosine lobe about −ns
+                u0 = u[:, 0]
+                pick = (u0 >= 1.0 - self.p_tr - self.p_dt) & (u0 < 1.0 - self.p_tr)
+                wi_l = np.where(pick[:, None], wi_l * np.array([1.0, 1.0, -1.0]), wi_l)
             wi = _normalize(to_world(wi_l, t, b, ns))
             f, pdf, cos_i, valid = self._eval_pdf(wo, wi, flipped, adjoint)
             valid &= pdf > 0.0
@@ -635,20 +709,22 @@ class Bsdf:
         """Cheap reflectance estimate kd + F0, (N, 3), for Russian roulette and AOV passes.
 
         Not the directional albedo: ignores Fresnel growth at grazing and Smith losses; the
-        glass lobe counts with its transmission tint.
+        glass lobe counts with its transmission tint, the translucent lobe with kdt (its
+        directional albedo, exactly).
         """
-        return np.clip(self.kd + self.f0 + self.kt, 0.0, 1.0)
+        return np.clip(self.kd + self.f0 + self.kt + self.kdt, 0.0, 1.0)
 
 
 #: The per-lane array fields of :class:`Bsdf` (what ``subset`` selects).
 _FIELDS = ("ns", "ng", "kd", "f0", "f90", "alpha", "p_spec", "is_diffuse", "kt", "p_tr", "kr", "eta",
-           "delta", "n_smooth", "shadowing")
+           "delta", "kdt", "p_dt", "n_smooth", "shadowing")
 
 
 def bsdf_max_value(table: MaterialTable, mat_idx: ArrayLike) -> F64:
     """Practical upper bound of f over directions, (N, 3) [sr⁻¹], for the Lightcuts material bound.
 
-    Exact for the diffuse part (kd/π). For the specular part it is the value of the lobe
+    Exact for the diffuse and translucent parts (kd/π + kdt/π; they never both reach one
+    direction, so the sum is loose by the smaller one). For the specular part it is the value of the lobe
     peak at normal incidence (wo = wi = n: D = 1/(πα²), G2 = 1) with the largest Fresnel
     value max(F0, F90) = F90:  F90/(4π α²). The true supremum is unbounded at grazing angles
     (f_spec ∝ 1/(n·wo n·wi)), so this is an approximation for glossy materials: the
@@ -673,7 +749,7 @@ def bsdf_max_value(table: MaterialTable, mat_idx: ArrayLike) -> F64:
     glass = np.where((bsdf.delta | (bsdf.p_tr <= 0.0))[:, None], 0.0,
                      (0.25 * bsdf.kr[:, None] + bsdf.kt * t_peak[:, None])
                      * _div(np.ones(n), np.pi * bsdf.alpha ** 2)[:, None])
-    return bsdf.kd * INV_PI + spec + glass
+    return bsdf.kd * INV_PI + spec + glass + bsdf.kdt * INV_PI
 
 
 def ggx_cosine_bound(cos_o: ArrayLike, alpha: ArrayLike, cos_r: ArrayLike) -> F64:

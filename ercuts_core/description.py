@@ -105,8 +105,8 @@ class MeshTable:
 class MaterialTable:
     """One row per material (structure of arrays).
 
-    The BSDF is a Lambertian base plus an optional GGX specular lobe
-    (see :mod:`ercuts_core.bsdf`).
+    The BSDF is a Lambertian base plus an optional GGX specular lobe, a glass lobe and a
+    diffuse transmission lobe (see :mod:`ercuts_core.bsdf`).
 
     Attributes:
         names: material names, for messages.
@@ -120,6 +120,9 @@ class MaterialTable:
         transmission: (M,) float32 Principled transmission weight in [0, 1] (1: glass).
             Default (``()``): 0 for every row.
         ior: (M,) float32 index of refraction of the glass lobe. Default (``()``): 1.5.
+        translucency: (M,) float32 weight in [0, 1] of the diffuse transmission lobe (Cycles'
+            Translucent BSDF, tinted by ``base_color``; 1: a Translucent BSDF). Default
+            (``()``): 0 for every row.
     """
 
     names: tuple[str, ...]
@@ -131,6 +134,7 @@ class MaterialTable:
     programs: tuple[str, ...] = ()
     transmission: F32 | tuple = ()
     ior: F32 | tuple = ()
+    translucency: F32 | tuple = ()
 
     def __post_init__(self):
         object.__setattr__(self, "names", tuple(str(n) for n in self.names))
@@ -139,10 +143,10 @@ class MaterialTable:
         object.__setattr__(self, "base_color", _f32(self.base_color, (3,)))
         object.__setattr__(self, "emission", _f32(self.emission, (3,)))
         m = len(self.names)
-        for name, default in (("transmission", 0.0), ("ior", 1.5)):
+        for name, default in (("transmission", 0.0), ("ior", 1.5), ("translucency", 0.0)):
             if len(np.asarray(getattr(self, name)).reshape(-1)) == 0:
                 object.__setattr__(self, name, np.full(m, default, np.float32))
-        for name in ("roughness", "metallic", "specular", "transmission", "ior"):
+        for name in ("roughness", "metallic", "specular", "transmission", "ior", "translucency"):
             object.__setattr__(self, name, _f32(getattr(self, name), ()).reshape(-1))
 
     @property

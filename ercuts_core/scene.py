@@ -155,7 +155,8 @@ class BuiltScene:
             b = self.shading.mesh.barycentrics(prim, np.asarray(p, np.float64).reshape(-1, 3)[lanes])
             n_smooth[lanes] = self._smooth_normals(prim, b, self.tri_ng[prim])
         return Bsdf.from_params(prm["base_color"], prm["roughness"], prm["metallic"], prm["specular"],
-                                ns, ng, n_smooth, model, prm["transmission"], prm["ior"])
+                                ns, ng, n_smooth, model, prm["transmission"], prm["ior"],
+                                prm["translucency"])
 
     def bsdf_max_value(self, mat: NDArray, p: NDArray) -> NDArray:
         """(N, 3) :func:`ercuts_core.bsdf.bsdf_max_value` at shading keys ``mat`` and positions p."""
@@ -165,7 +166,7 @@ class BuiltScene:
         prm = self.shading.bsdf_params(mat, p, up, up)
         table = self.materials.__class__(
             ("",) * len(mat), prm["base_color"], prm["roughness"], prm["metallic"], prm["specular"],
-            np.zeros((len(mat), 3)), (), prm["transmission"], prm["ior"])
+            np.zeros((len(mat), 3)), (), prm["transmission"], prm["ior"], prm["translucency"])
         return bsdf_max_value(table, np.arange(len(mat)))
 
     def roughness(self, mat: NDArray, p: NDArray) -> NDArray:

@@ -191,11 +191,17 @@ def _clean_materials(mats: MaterialTable, issues: list[Issue], n_textures: int =
         return np.clip(np.nan_to_num(a, nan=default, posinf=hi, neginf=lo), lo, hi)
     rows = [np.asarray(a, np.float64).reshape(mats.n_materials, -1) for a in
             (mats.base_color, mats.roughness, mats.metallic, mats.specular, mats.emission,
-             mats.transmission, mats.ior)]
+             mats.transmission, mats.ior, mats.translucency)]
     bad = ~np.isfinite(np.hstack(rows)).all(axis=1)
     for i in np.flatnonzero(bad):
         issues.append(Issue("warning", "nonfinite_material",
                             f"Material '{mats.names[i]}': NaN/Inf values replaced by defaults (no emission)"))
+    # Translucency (a lobe weight) outside [0, 1]: clamped, with a warning naming the material
+    tl = np.asarray(mats.translucency, np.float64)
+    for i in np.flatnonzero(np.isfinite(tl) & ((tl < 0.0) | (tl > 1.0))):
+        issues.append(Issue("warning", "translucency_out_of_range",
+                            f"Material '{mats.names[i]}': translucency {tl[i]:g} outside [0, 1], "
+                            f"clamped to {min(max(tl[i], 0.0), 1.0):g}"))
     programs = mats.programs
     if len(programs) != mats.n_materials:
         issues.append(Issue("warning", "program_count_mismatch",
@@ -214,6 +220,7 @@ def _clean_materials(mats: MaterialTable, issues: list[Issue], n_textures: int =
         programs + ("",),
         np.append(fix(mats.transmission, 0, 1, 0.0), 0.0),
         np.append(fix(mats.ior, 1.0, 10.0, 1.5), 1.5),
+        np.append(fix(mats.translucency, 0, 1, 0.0), 0.0),
     )
 
 

@@ -7,7 +7,8 @@ read go to the scene's texture table (:mod:`.images`). Everything that cannot be
 translated gives *one* warning per material naming the nodes, and the documented fallback
 (the input's own value for an unsupported value node, grey diffuse for an unsupported
 shader). Glass and mirrors (Principled Transmission/IOR, Glass, Refraction, Glossy)
-fill the table's ``transmission`` and ``ior`` columns (mapping in :mod:`.shaders`).
+fill the table's ``transmission`` and ``ior`` columns, the Translucent BSDF its
+``translucency`` column (mapping in :mod:`.shaders`).
 Materials without a node tree render their viewport colour as a diffuse, like Cycles;
 objects without a material get Cycles' default grey diffuse. Materials with an
 object-space Normal Map get one row per object matrix.
@@ -45,6 +46,8 @@ class MaterialRow:
     #: glass lobe weight (Principled Transmission Weight; 1 = Glass BSDF) and its IOR
     transmission: float = 0.0
     ior: float = 1.5
+    #: weight of the translucent lobe (1 = Translucent BSDF)
+    translucency: float = 0.0
     #: shading program (JSON, ``ercuts_core.shading``); "" = the constants above
     program: str = ""
     uses_uvs: bool = False
@@ -225,4 +228,5 @@ class MaterialCollector:
             programs=tuple(r.program for r in rows),
             transmission=np.array([r.transmission for r in rows], np.float32),
             ior=np.array([r.ior for r in rows], np.float32),
+            translucency=np.array([r.translucency for r in rows], np.float32),
         )

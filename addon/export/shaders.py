@@ -8,7 +8,8 @@ input and produces
 * a program (JSON, version 1): value nodes only, in topological order, plus the outputs
   ``base_color, roughness, metallic, specular, emission, alpha, normal`` and, when the
   material transmits anywhere (transmission not the constant 0), ``transmission, ior``
-  (opaque materials' programs are as before; their rows say transmission 0). The program
+  (opaque materials' programs are as before; their rows say transmission 0), and when it is
+  translucent anywhere (a Translucent BSDF reaches the output), ``translucency``. The program
   is ``""`` when every output is a constant, alpha is 1 and there is no normal input.
 
 What the compiler does
@@ -26,7 +27,8 @@ What the compiler does
   luminance (``RGB_TO_BW``), vector → float the average (``VECT_MATH DOT_PRODUCT`` with
   (⅓, ⅓, ⅓)), float → colour/vector a broadcast (``COMBXYZ``). So a ref always has the
   type of the socket or output it feeds: floats for
-  roughness/metallic/specular/alpha/transmission/ior, 3-vectors for base_color/emission/normal.
+  roughness/metallic/specular/alpha/transmission/ior/translucency, 3-vectors for
+  base_color/emission/normal.
 * Closures are reduced here. Each shader socket becomes a set of lobe parameters with an
   opacity α (1 opaque, 0 = Transparent BSDF) and a flag "has a BSDF":
 
@@ -58,21 +60,31 @@ What the compiler does
     transmission-only lobe in the core.
   - Diffuse: colour, normal (roughness 1, metallic 0, specular 0 as today; its own
     roughness — Oren–Nayar — ignored with a note). Emission: colour × strength, black base.
+  - Translucent BSDF: base colour = Color, normal, translucency 1 (roughness 1, metallic 0,
+    specular 0 as the Diffuse BSDF): the core's translucent lobe, Color/π toward the far side
+    (Cycles' ``bsdf_translucent``), exact. In a Mix/Add its weight blends like transmission
+    (Mix(Diffuse, Translucent, f) is translucency f; Mix(Glass, Translucent, f) transmission
+    1 − f and translucency f: the core's shares add, ``ercuts_core.bsdf``), exact when the
+    sides share one colour; differently coloured Diffuse and Translucent BSDFs share the
+    blended colour (the total albedo is Cycles', its split between the two sides is not).
   - Transparent BSDF: α = 0 (a tinted one: a note; rendered as white transparency).
   - Mix Shader mix(f, A, B): α = mix(f, αA, αB); every other parameter is blended with
     t = f·αB / α (so a mix with a Transparent BSDF keeps the opaque side's parameters and
     the core's stochastic alpha does the weighting; t = f when αA = αB = 1). A side without
     a BSDF (Emission, Transparent) does not blend the BSDF parameters
-    roughness/metallic/specular/transmission/ior/normal: the other side's are used; base
+    roughness/metallic/specular/transmission/translucency/ior/normal: the other side's are
+    used; base
     colours and emission are always blended. The IOR of a mix where one side does not
     transmit (constant transmission 0) is the transmitting side's, else it is blended.
     Exact for diffuse/diffuse, emission and transparency mixes; mixes of two different GGX
     lobes (or of glass and an opaque lobe with different colours) are approximated by one
     lobe with blended parameters (Mix(Diffuse, Glass, 0.3) is Principled transmission 0.3).
   - Add Shader: base colours and emissions add; α = clamp(αA + αB − 1, 0, 1) (Cycles adds
-    the transparent weights); roughness/metallic/specular/transmission/normal from the side
-    with a BSDF, the mean of both when both have one (ior as for Mix, at t = ½).
-  - Anything else (Translucent, SSS, Toon, Sheen, Hair, Volume, …):
+    the transparent weights); roughness/metallic/specular/transmission/translucency/normal
+    from the side with a BSDF, the mean of both when both have one (ior as for Mix, at t = ½;
+    Add(Diffuse c, Translucent c) is base 2c, clipped to 1, with translucency ½: exact for
+    c ≤ ½).
+  - Anything else (SSS, Toon, Sheen, Hair, Volume, …):
     one note naming the node and Cycles' grey diffuse (today's policy).
 * Value nodes follow the table of ``ercuts_core.shading``. Map Range (float, linear) and
   Clamp are compiled into MATH nodes. Texture Coordinate Object / Generated / Normal are
@@ -110,7 +122,7 @@ DEFAULT_IOR = 1.5
 #: The core's accepted IOR range (``ercuts_core.bsdf.IOR_MIN/IOR_MAX``, rounded).
 IOR_RANGE = (1.0, 10.0)
 #: BSDF parameters of a :class:`Closure`: blended by Mix/Add only between sides with a BSDF.
-BSDF_PARAMS = ("roughness", "metallic", "specular", "transmission")
+BSDF_PARAMS = ("roughness", "metallic", "specular", "transmission", "translucency")
 #: Nesting limit for node groups (a deeper stack is reported as a cycle).
 MAX_GROUP_DEPTH = 32
 
@@ -214,6 +226,7 @@ class Closure:
     has_bsdf: bool = False
     transmission: object = 0.0
     ior: object = DEFAULT_IOR
+    translucency: object = 0.0
 
 
 @dataclass
@@ -222,7 +235,7 @@ class Compiled:
 
     Attributes:
         constants: the row's values (base_color, roughness, metallic, specular, emission,
-            transmission, ior);
+            transmission, ior, translucency);
             outputs that are refs get an estimate (image means, socket values).
         program: JSON string, or "" when the row's constants say everything.
         notes: what could not be translated (one entry per node/issue).
@@ -630,6 +643,10 @@ class _Compiler:
                 self.note("Diffuse BSDF roughness (Oren-Nayar) ignored, rendered as Lambert")
             return Closure(base_color=self.value(node.inputs["Color"], ctx, "C"),
                            normal=self.normal(node.inputs.get("Normal"), ctx), has_bsdf=True)
+        if t == "BSDF_TRANSLUCENT":
+            return Closure(base_color=self.value(node.inputs["Color"], ctx, "C"),
+                           normal=self.normal(node.inputs.get("Normal"), ctx), has_bsdf=True,
+                           translucency=1.0)
         if t == "EMISSION":
             color = self.value(node.inputs["Color"], ctx, "C")
             strength = self.value(node.inputs["Strength"], ctx, "F")
@@ -1036,6 +1053,9 @@ def compile_material(mat, textures=None, space: ObjectSpace | None = None) -> Co
     # constants, transmission 0, say the rest; programs of opaque materials stay as before)
     if is_ref(closure.transmission) or closure.transmission != 0.0:
         names += ("transmission", "ior")
+    # translucency: likewise only when something is translucent
+    if is_ref(closure.translucency) or closure.translucency != 0.0:
+        names += ("translucency",)
     refs = any(is_ref(getattr(closure, n)) for n in names)
     needs_program = refs or closure.normal is not None or (
         not is_ref(closure.alpha) and closure.alpha != 1.0)
@@ -1064,6 +1084,8 @@ def _row_constants(c: Closure, comp: _Compiler | None = None) -> dict:
     emit = est(c.emission, (0.0, 0.0, 0.0))
     trans = est(c.transmission, 0.0)
     ior = est(c.ior, DEFAULT_IOR)
+    translucency = est(c.translucency, 0.0)
+
     def vec(v):
         return np.asarray(v, float).reshape(-1)[:3] if np.ndim(v) else np.full(3, float(v))
 
@@ -1078,6 +1100,7 @@ def _row_constants(c: Closure, comp: _Compiler | None = None) -> dict:
         emission=tuple(float(x) for x in np.maximum(vec(emit), 0.0)),
         transmission=_clip01(num(trans)),
         ior=float(min(max(num(ior), IOR_RANGE[0]), IOR_RANGE[1])),
+        translucency=_clip01(num(translucency)),
     )
 
 

@@ -205,9 +205,10 @@ class Subpaths:
             (``Bsdf.is_delta``, pbrt ``IsConnectible``); True where no BSDF was built.
         clear: (V, N) the vertex's BSDF is a mirror or glass only (``Bsdf.is_specular_or_glass``;
             the path classes of :meth:`BDPTIntegrator._count_delta`); False where none was built.
-        reflect_only: (V, N) the vertex's BSDF has no glass lobe, so f = 0 unless wo and wi
-            lie on one side (connection rows are pre-filtered by side only there; rough
-            glass transmits through ``eval``); False where no BSDF was built.
+        reflect_only: (V, N) the vertex's BSDF has no glass and no translucent lobe
+            (``Bsdf.reflect_only``), so f = 0 unless wo and wi lie on one side (connection
+            rows are pre-filtered by side only there; rough glass and translucent surfaces
+            transmit through ``eval``); False where no BSDF was built.
         count: (N,) number of vertices (vertex 0 always exists).
         on_surface0, infinite0: (N,) vertex 0 lies on a surface / is at infinity.
         raster: (N, 2) camera subpaths: full-frame raster position of the camera sample.
@@ -576,7 +577,7 @@ class BDPTIntegrator(Integrator):
             if last:
                 break
             path.connectible[k, lanes] = ~bsdf.is_delta
-            path.reflect_only[k, lanes] = bsdf.p_tr <= 0.0
+            path.reflect_only[k, lanes] = bsdf.reflect_only
             # Sample the BSDF for the next vertex
             bs = bsdf.sample(wo, rng.random((len(lanes), 3)), adjoint=importance)
             beta = beta * bs.weight

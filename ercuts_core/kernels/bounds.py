@@ -253,7 +253,7 @@ def _cb(a0, a1, a2, lo0, lo1, lo2, hi0, hi1, hi2, sign):
 
 
 @jit
-def glass_pair_bound(pt, node, p, ns, wo, r, t, cos_o, alpha, eta, kd_pi, spec, kr, kt,
+def glass_pair_bound(pt, node, p, ns, wo, r, t, cos_o, alpha, eta, kd_pi, spec, kr, kt, kdt_pi,
                      is_leaf, intensity, bmin, bmax, cone_axis, cone_cos, clamp) -> float:
     """L̄_C = Ḡ_C·Y(M̄ ⊙ I_C) of one rough glass entry (lightcuts._glass_material_bound)."""
     if is_leaf[node]:
@@ -279,7 +279,7 @@ def glass_pair_bound(pt, node, p, ns, wo, r, t, cos_o, alpha, eta, kd_pi, spec, 
     rk = refl * kr[pt]
     m = 0.0
     for j in range(3):
-        mb = cb_up * kd_pi[pt, j] + s * spec[pt, j] + rk + trans * kt[pt, j]
+        mb = cb_up * kd_pi[pt, j] + s * spec[pt, j] + rk + trans * kt[pt, j] + cb_dn * kdt_pi[pt, j]
         m += mb * intensity[node, j] * (_WR if j == 0 else (_WG if j == 1 else _WB))
     if not m > 0.0:
         return 0.0
@@ -288,13 +288,13 @@ def glass_pair_bound(pt, node, p, ns, wo, r, t, cos_o, alpha, eta, kd_pi, spec, 
 
 
 @jit
-def glass_bounds(pidx, node, p, ns, wo, r, t, cos_o, alpha, eta, kd_pi, spec, kr, kt, is_leaf,
+def glass_bounds(pidx, node, p, ns, wo, r, t, cos_o, alpha, eta, kd_pi, spec, kr, kt, kdt_pi, is_leaf,
                  intensity, bmin, bmax, cone_axis, cone_cos, clamp):
     """(K,) bounds L̄_C of the rough glass entries (pidx, node) (K,)."""
     K = pidx.shape[0]
     out = np.empty(K)
     for k in range(K):
         out[k] = glass_pair_bound(pidx[k], node[k], p, ns, wo, r, t, cos_o, alpha, eta, kd_pi,
-                                  spec, kr, kt, is_leaf, intensity, bmin, bmax, cone_axis,
+                                  spec, kr, kt, kdt_pi, is_leaf, intensity, bmin, bmax, cone_axis,
                                   cone_cos, clamp)
     return out

@@ -22,7 +22,8 @@ Program format (version 1), a JSON string per material row (``MaterialTable.prog
      "outputs": {"base_color": <value>, "roughness": <value>, "metallic": <value>,
                  "specular": <value>, "emission": <value>,   # radiance = colour × strength
                  "alpha": <value>, "normal": <value> | null,  # normal: world-space vector
-                 "transmission": <value>, "ior": <value>},    # optional: glass lobe
+                 "transmission": <value>, "ior": <value>,     # optional: glass lobe
+                 "translucency": <value>},                    # optional: Translucent BSDF
      "bump_shadowing": "NONE" | "CHIANG2019" | "ESTEVEZ2019"}   # optional, default NONE
 
     <value> := number | [x, y, z] | {"node": <index>, "socket": <output socket name>}

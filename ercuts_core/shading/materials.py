@@ -73,7 +73,8 @@ class SceneShading:
                           "metallic": mats.metallic.astype(np.float64),
                           "specular": mats.specular.astype(np.float64),
                           "transmission": mats.transmission.astype(np.float64),
-                          "ior": mats.ior.astype(np.float64)}
+                          "ior": mats.ior.astype(np.float64),
+                          "translucency": mats.translucency.astype(np.float64)}
 
     def _init_families(self) -> None:
         """Group rows whose programs differ only in constants (:func:`program.signature`):
@@ -147,7 +148,7 @@ class SceneShading:
 
     def bsdf_params(self, key: NDArray, p: NDArray, ns: NDArray, ng: NDArray) -> dict[str, NDArray]:
         """Principled parameters per lane: base_color (N, 3), roughness, metallic, specular,
-        transmission, ior (N,).
+        transmission, ior, translucency (N,).
 
         Constant rows are gathered from the table; textured keys are evaluated per material.
         """

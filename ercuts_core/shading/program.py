@@ -24,9 +24,10 @@ from .nodes import BLEND_MODES, MATH_OPS, NODES, VECT_MATH_OPS, C, F, V, Inputs,
 
 #: Program outputs and their kinds (f: float, c: colour, v: vector).
 OUTPUTS = {"base_color": C, "roughness": F, "metallic": F, "specular": F, "emission": C,
-           "alpha": F, "normal": V, "transmission": F, "ior": F}
+           "alpha": F, "normal": V, "transmission": F, "ior": F, "translucency": F}
 #: The outputs that parameterise the BSDF.
-BSDF_OUTPUTS = ("base_color", "roughness", "metallic", "specular", "transmission", "ior")
+BSDF_OUTPUTS = ("base_color", "roughness", "metallic", "specular", "transmission", "ior",
+                "translucency")
 
 
 class ProgramError(ValueError):

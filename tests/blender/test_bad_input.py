@@ -226,7 +226,7 @@ def test_material_without_output_node_warns_naming_it(tmp_path):
 
 
 def test_unsupported_node_warns_once_and_falls_back_to_grey(tmp_path):
-    mat = bh.node_material("Velvety", "ShaderNodeBsdfTranslucent")
+    mat = bh.node_material("Velvety", "ShaderNodeBsdfToon")
     lit_scene(material=mat)
     bh.plane("Second", size=1.0, location=(0, 0, 0.2), material=mat)   # used twice, warned once
     img = render(tmp_path)

@@ -213,10 +213,10 @@ class Gather:
         glossy = (GlossyReceivers.from_bsdf(bsdf, wo, g.ns[idx])
                   if GLOSSY_CLUSTER_BOUND and not bsdf.all_diffuse else None)
         f_bound = scene.bsdf_max_value(g.mat[idx], p)
-        # Rough glass transmits VPL light from the far side: |cos θ_x| there, as the VPLs'
-        # normalisation (vpl.vpl_radiance) counts it
-        rough_glass = (bsdf.p_tr > 0.0) & ~bsdf.delta
-        transmissive = rough_glass if rough_glass.any() else None
+        # Rough glass and translucent surfaces transmit VPL light from the far side: |cos θ_x|
+        # there, as the VPLs' normalisation (vpl.vpl_radiance) counts it
+        through = ((bsdf.p_tr > 0.0) & ~bsdf.delta) | bsdf.translucent
+        transmissive = through if through.any() else None
         return ShadingPoints(p, g.ns[idx], wo, f_bound, eval_f, visible,
                              transmissive=transmissive, glossy=glossy)
 

@@ -103,6 +103,10 @@ class GlossyReceivers:
     the same M̄ still bounds M.  The diffuse and opaque specular parts of such a point (a
     partly transmitting Principled BSDF) use the upper side cosbound(x, n, B).
 
+    A translucent lobe (``kdt_pi``: Cycles' Translucent BSDF, kdt/π for wi on the far side)
+    adds (kdt/π)·cosbound(x, −n, B) at rough glass points and (kdt/π)·cb at the others, cb
+    the receiver cosine bound (both sides: translucent points are ``transmissive``).
+
     Attributes:
         mask: (P,) bool, points whose per-cluster bound is used.
         r: (P,3) unit mirror directions of wo about the lobe's normal.
@@ -118,6 +122,7 @@ class GlossyReceivers:
         eta: (P,) relative index η' = η_t/η_i of the glass lobe for this wo.
         kr: (P,) glass reflection weight (1 − m)·t (0 where n·wo ≤ COS_EPS).
         kt: (P,3) glass transmission weight (1 − m)·t·base (0 where n·wo ≤ COS_EPS).
+        kdt_pi: (P,3) translucent part kdt/π [1/sr] (None: no point has one).
     """
 
     mask: NDArray
@@ -133,6 +138,7 @@ class GlossyReceivers:
     eta: NDArray | None = None
     kr: NDArray | None = None
     kt: NDArray | None = None
+    kdt_pi: NDArray | None = None
 
     @classmethod
     def from_bsdf(cls, bsdf: Bsdf, wo: NDArray, n: NDArray) -> GlossyReceivers:
@@ -158,8 +164,9 @@ class GlossyReceivers:
         spec = np.where(lit[:, None], np.maximum(bsdf.f0, bsdf.f90), 0.0)
         r = 2.0 * cos_o[:, None] * ns - wo
         alpha = np.asarray(bsdf.alpha, np.float64)
+        kdt_pi = bsdf.kdt * INV_PI if bsdf.has_translucent else None
         if not has_glass.any():
-            return cls(mask, r, bsdf.kd * INV_PI, spec, cos_o, alpha)
+            return cls(mask, r, bsdf.kd * INV_PI, spec, cos_o, alpha, kdt_pi=kdt_pi)
         # Rough glass points: both sides of the surface count (bounds per side)
         lit_g = has_glass & (cos_o > COS_EPS)
         spec = np.where(lit_g[:, None], np.maximum(bsdf.f0, bsdf.f90), spec)
@@ -167,7 +174,7 @@ class GlossyReceivers:
         t, _ = refracted_direction(wo, ns, eta)
         return cls(mask | has_glass, r, bsdf.kd * INV_PI, spec, cos_o, alpha, glass=has_glass,
                    ns=ns, wo=wo, t=t, eta=eta, kr=np.where(lit_g, bsdf.kr, 0.0),
-                   kt=np.where(lit_g[:, None], bsdf.kt, 0.0))
+                   kt=np.where(lit_g[:, None], bsdf.kt, 0.0), kdt_pi=kdt_pi)
 
     def subset(self, idx: NDArray) -> GlossyReceivers:
         """The points ``idx`` (rows of every array field)."""
@@ -366,6 +373,8 @@ def _glossy_material_bound(pts: ShadingPoints, pidx: NDArray, bmin: NDArray, bma
         s = ggx_cosine_bound(gl.cos_o[q], gl.alpha[q], cos_r)
         s = np.where(cb[k] > 0.0, s, 0.0)
         mb = cb[k, None] * take_rows(gl.kd_pi, q) + s[:, None] * take_rows(gl.spec, q)
+        if gl.kdt_pi is not None:       # translucent: cb covers both sides (transmissive)
+            mb = mb + cb[k, None] * take_rows(gl.kdt_pi, q)
         m[k] = luminance(mb * inten[k])
     if kg.size:
         m[kg] = luminance(_glass_material_bound(gl, take_rows(pts.p, pidx[kg]), pidx[kg], bmin[kg],
@@ -377,7 +386,7 @@ def _glass_material_bound(gl: GlossyReceivers, x: NDArray, q: NDArray, bmin: NDA
                           bmax: NDArray) -> NDArray:
     """M̄ (K,3) [1/sr] of rough glass points ``q`` (K,) at positions x (K,3) over the boxes
     [bmin, bmax] (K,3): the sum in :class:`GlossyReceivers` (diffuse, opaque specular, glass
-    reflection on the side of ``ns``, glass transmission on the other side)."""
+    reflection on the side of ``ns``, glass transmission and translucency on the other side)."""
     n, wo = take_rows(gl.ns, q), take_rows(gl.wo, q)
     cb_up = cosine_bound(x, n, bmin, bmax)
     cb_dn = cosine_bound(x, -n, bmin, bmax)
@@ -391,8 +400,11 @@ def _glass_material_bound(gl: GlossyReceivers, x: NDArray, q: NDArray, bmin: NDA
     s = np.where(up, ggx_cosine_bound(cos_o, alpha, cos_r), 0.0)
     refl = np.where(up, refl, 0.0)
     trans = np.where(cb_dn > 0.0, trans, 0.0)
-    return (cb_up[:, None] * take_rows(gl.kd_pi, q) + s[:, None] * take_rows(gl.spec, q)
-            + (refl * gl.kr[q])[:, None] + trans[:, None] * take_rows(gl.kt, q))
+    mb = (cb_up[:, None] * take_rows(gl.kd_pi, q) + s[:, None] * take_rows(gl.spec, q)
+          + (refl * gl.kr[q])[:, None] + trans[:, None] * take_rows(gl.kt, q))
+    if gl.kdt_pi is not None:
+        mb = mb + cb_dn[:, None] * take_rows(gl.kdt_pi, q)
+    return mb
 
 
 def cluster_bound(tree: LightTree, node: NDArray, pts: ShadingPoints, pidx: NDArray,
@@ -455,9 +467,10 @@ def _cluster_bound_compiled(tree: LightTree, node: NDArray, pts: ShadingPoints, 
 def _glass_arrays(pts: ShadingPoints) -> tuple:
     """The arrays of :func:`ercuts_core.kernels.bounds.glass_bounds` (contiguous float64)."""
     gl = pts.glossy
+    kdt_pi = np.zeros_like(gl.kd_pi) if gl.kdt_pi is None else gl.kdt_pi
     return tuple(np.ascontiguousarray(a, np.float64) for a in
                  (pts.p, gl.ns, gl.wo, gl.r, gl.t, gl.cos_o, gl.alpha, gl.eta, gl.kd_pi, gl.spec,
-                  gl.kr, gl.kt))
+                  gl.kr, gl.kt, kdt_pi))
 
 
 def _point_arrays(pts: ShadingPoints) -> tuple:

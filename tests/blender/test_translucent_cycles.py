@@ -53,15 +53,16 @@ def _skip_on_3x(integrator):
                     "Cycles differs, which PATH and BDPT compare)")
 
 
-#: Measured (bpy 5.0.1, seeds 1–4, 64×48, 8×8 blocks): the floor in front of the panel, lit by
-#: the light the panel lets through, is 5–11 % darker in ERCUTS than in Cycles (block z −4 to
-#: −7 along the bottom block row; image mean −0.5 %, χ² p 3·10⁻¹⁷, max |z| 6.9). Not the VPL
-#: clamp (clamp 0: the same), not the cuts (brute-force gather: the same), not the chains'
-#: mutations (chain length 1: the same); an opaque diffuse panel and a translucent panel lit
-#: from the camera's side pass (z² 1.39 and 0.83). Cause not found yet (README, Known
-#: limitations); PATH and BDPT agree with Cycles.
-_ERCUTS_DARK_FLOOR = ("ERCUTS renders the floor lit through a back-lit translucent panel 5–11 % "
-                      "dark (cause open; see _ERCUTS_DARK_FLOOR's comment)")
+#: Measured (bpy 5.0.1, 64×48, 8×8 blocks): with seeds 1–4 ERCUTS's bottom block row (the
+#: floor in front, lit by the few VPLs on the panel) is 5–11 % dark (block z −4 to −7; image
+#: mean −0.5 %; max |z| 6.9) — the same with clamp 0, a brute-force gather, chain length 1 or
+#: no mutations, so it comes with the BDPT seeds of those four seeds. It is a fluctuation, not
+#: a bias: in the core (same scene) seeds 5–12 give 0.99–1.03 of a 2048-spp PATH reference
+#: there, and here seeds 9–16 pass (z² 1.45, max |z| 4.0), seeds 1–8 do not (z² 2.35). ERCUTS's
+#: noise is heavy-tailed and shared by blocks (one VPL lights the whole row), which the block
+#: test's per-pixel variance from four seeds misjudges: a calibration limit of the test.
+_ERCUTS_DARK_FLOOR = ("seeds 1-4: a correlated VPL fluctuation on the floor in front of the panel "
+                      "(see _ERCUTS_DARK_FLOOR's comment); seeds 9-16 pass")
 
 
 @pytest.mark.parametrize("integrator", [

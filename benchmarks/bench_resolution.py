@@ -42,7 +42,7 @@ RUNS = os.path.join(RESULTS, "resolution_runs")
 SIZES = ((160, 120), (640, 480), (1280, 720), (1920, 1080))
 BUDGETS = {(160, 120): 30.0, (640, 480): 120.0, (1280, 720): 300.0, (1920, 1080): 600.0}
 ENGINES = ("ERCUTS", "BDPT", "PATH", "CYCLES")
-SCENES = ("s_corridor", "door_ajar", "baffled_lamp")
+SCENES = ("s_corridor", "door_ajar", "baffled_lamp", "veach_room", "mirror_glass_room")
 #: Targets: ERCUTS ≤ 0.25× Cycles' relMSE at 1280×720 in 5 min and ≤ 0.5× at 1920×1080 in
 #: 10 min; peak memory at 1080p under 4 GiB with the defaults.
 TARGETS = {(1280, 720): 0.25, (1920, 1080): 0.5}
@@ -68,7 +68,7 @@ def render_child(scene: str, engine: str, w: int, h: int, budget: float, seed: i
     if engine == "CYCLES":
         import cycles_runner
 
-        rate = cycles_runner.calibrate(scene, w, h, samples=4)
+        rate = cycles_runner.calibrate(scene, w, h, samples=16)  # 4 left start-up in the rate
         r = cycles_runner.render_cycles(scene, budget, seed, w, h, rate)
         image = r.pop("image")
         record.update(samples=r["samples"], capped=r["capped"], settings=r["settings"])

@@ -488,11 +488,20 @@ class Bsdf:
             # Lambert only: f = kd/π, pdf = cos_i/π on the valid set (see all_diffuse).
             w = np.where(valid, inv_pi, 0.0)          # kd ≥ 0 finite: kd·0 = +0 exactly
             f, pdf = self.kd * w[:, None], np.where(valid, cos_i * INV_PI, 0.0)
-            if self.has_translucent:
-                # Lambert and translucent: the diffuse lobe is chosen with 1 − p_dt
-                f_t, pdf_t, valid_t = self._translucent(wo, wi, ns, ng, cos_o, cos_i)
-                f, pdf, valid = f + f_t, pdf * (1.0 - self.p_dt) + pdf_t, valid | valid_t
-            return f, pdf, cos_i, valid
+            if self.has_translucent:                  # the diffuse lobe is chosen with 1 − p_dt
+                pdf = pdf * (1.0 - self.p_dt)
+        else:
+            f, pdf, valid = self._reflection_and_glass(wo, wi, ns, ng, cos_o, cos_i, valid, inv_pi,
+                                                       adjoint)
+        if self.has_translucent:
+            f_t, pdf_t, valid_t = self._translucent(wo, wi, ns, ng, cos_o, cos_i)
+            f, pdf, valid = f + f_t, pdf + pdf_t, valid | valid_t
+        return f, pdf, cos_i, valid
+
+    def _reflection_and_glass(self, wo: F64, wi: F64, ns: F64, ng: F64, cos_o: F64, cos_i: F64,
+                              valid: B, inv_pi: F64, adjoint: bool) -> tuple[F64, F64, B]:
+        """Diffuse + GGX reflection (Heitz 2014) and the rough glass lobe of :meth:`_eval_pdf`:
+        f (N, 3) [sr⁻¹], their share of the mixture pdf (N,) [sr⁻¹] and validity (N,)."""
         # Half vector terms; wo + wi is computed the same way for (wo, wi) and (wi, wo)
         h_len = np.sqrt(dot(wo + wi, wo + wi))
         cos_h = np.clip(_div(cos_o + cos_i, h_len), 0.0, 1.0)
@@ -513,10 +522,7 @@ class Bsdf:
         if self.has_rough_glass:
             f_g, pdf_g, valid_g = self._rough_glass(wo, wi, ns, ng, cos_o, cos_i, adjoint)
             f, pdf, valid = f + f_g, pdf + self.p_tr * pdf_g, valid | valid_g
-        if self.has_translucent:
-            f_t, pdf_t, valid_t = self._translucent(wo, wi, ns, ng, cos_o, cos_i)
-            f, pdf, valid = f + f_t, pdf + pdf_t, valid | valid_t
-        return f, pdf, cos_i, valid
+        return f, pdf, valid
 
     def _translucent(self, wo: F64, wi: F64, ns: F64, ng: F64, cos_o: F64,
                      cos_i: F64) -> tuple[F64, F64, B]:

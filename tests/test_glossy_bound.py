@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ercuts_core.bsdf import Bsdf, bsdf_max_value, ggx_cosine_bound, ggx_d, smith_lambda
+from ercuts_core.bsdf import Bsdf, ggx_cosine_bound, ggx_d, smith_lambda
 from ercuts_core.description import MaterialTable
 from ercuts_core.integrators.ercuts.light_tree import build_light_tree
 from ercuts_core.integrators.ercuts.lightcuts import (
@@ -29,7 +29,7 @@ ROUGHNESS = (0.05, 0.1, 0.2, 0.35, 0.5)
 
 
 from ercuts_core.vecmath import dot as _dot
-from tests.vpl_cases import random_vpls
+from tests.vpl_cases import random_vpls, receiver_points
 from tests.vpl_cases import unit as _unit
 
 
@@ -57,15 +57,7 @@ def glossy_points(n: int, seed: int, diffuse_share: float = 0.0, new_bound: bool
                           np.where(diffuse, 1.0, np.array(ROUGHNESS)[np.arange(n) % len(ROUGHNESS)]),
                           np.where(diffuse, 0.0, (rng.random(n) < 0.5) * rng.random(n)),
                           np.where(diffuse, 0.0, rng.uniform(0.2, 1.0, n)), np.zeros((n, 3)))
-    idx = np.arange(n)
-    bsdf = Bsdf.from_table(table, idx, nrm, nrm)
-
-    def eval_f(i: np.ndarray, wi: np.ndarray) -> np.ndarray:
-        return bsdf.subset(i).eval(wo[i], wi)
-
-    glossy = GlossyReceivers.from_bsdf(bsdf, wo, nrm) if new_bound else None
-    return ShadingPoints(x, nrm, wo, bsdf_max_value(table, idx), eval_f,
-                         lambda i, q, qn: np.ones(len(i), bool), glossy=glossy)
+    return receiver_points(table, x, nrm, wo, glossy=new_bound)
 
 
 def memberships(tree) -> tuple[np.ndarray, np.ndarray]:

@@ -30,7 +30,7 @@ from ercuts_core.integrators.ercuts.lightcuts import (GlossyReceivers, ShadingPo
 from ercuts_core.sampling import luminance
 from ercuts_core.vecmath import dot
 from tests.test_glossy_bound import bound_table, violations, worst_member
-from tests.vpl_cases import random_vpls, unit
+from tests.vpl_cases import random_vpls, receiver_points, unit
 
 #: Relative slack for rounding (the bound is exact at the peak: ratios reach 1 − 1e-7).
 TOL = 1e-9
@@ -241,16 +241,8 @@ def glass_points(n: int, seed: int, diffuse_share: float = 0.0) -> ShadingPoints
     table.transmission[dif] = 0.0
     table.roughness[dif] = 1.0
     table.specular[dif] = 0.0
-    idx = np.arange(n)
-    bsdf = Bsdf.from_table(table, idx, ns, ns)
     x = rng.random((n, 3)) * 6.0 - 3.0
-
-    def eval_f(i, wi):
-        return bsdf.subset(i).eval(wo[i], wi)
-
-    return ShadingPoints(x, ns, wo, bsdf_max_value(table, idx), eval_f,
-                         lambda i, q, qn: np.ones(len(i), bool), transmissive=~dif,
-                         glossy=GlossyReceivers.from_bsdf(bsdf, wo, ns))
+    return receiver_points(table, x, ns, wo, transmissive=~dif)
 
 
 @pytest.mark.parametrize("seed", [0, 1])

@@ -30,6 +30,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from stats import SphericalDomain, chi2_test, frame_from_pole  # noqa: E402
+from vpl_cases import random_vpls, receiver_points, unit  # noqa: E402
 
 from ercuts_core.bsdf import Bsdf, bsdf_max_value  # noqa: E402
 from ercuts_core.description import (AreaLights, CameraDesc, MaterialTable, MeshTable,  # noqa: E402
@@ -54,11 +55,6 @@ def direction(cos_t, phi, n=N):
     t, b = coordinate_system(n[None, :])
     s = np.sqrt(max(0.0, 1.0 - cos_t * cos_t))
     return (s * np.cos(phi) * t + s * np.sin(phi) * b + cos_t * n[None, :])[0]
-
-
-def unit(v):
-    v = np.asarray(v, np.float64)
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
 # name: (translucency, roughness, specular, transmission, cos_o, wo inside)
@@ -268,7 +264,6 @@ def test_flags_and_max_value():
 def translucent_points(n, seed):
     """Receivers as the gather builds them (lightcut normal on wo's side, transmissive): pure
     translucent Lambert, translucent + glossy GGX, translucent + rough glass."""
-    from ercuts_core.integrators.ercuts.lightcuts import GlossyReceivers, ShadingPoints
     rng = np.random.default_rng(seed)
     nrm = unit(rng.normal(size=(n, 3)))
     wo = unit(rng.normal(size=(n, 3)))
@@ -278,15 +273,8 @@ def translucent_points(n, seed):
                           np.where(kind == 0, 1.0, rng.uniform(0.1, 0.6, n)), np.zeros(n),
                           np.where(kind == 0, 0.0, 0.5), np.zeros((n, 3)), (),
                           np.where(kind == 2, 0.5, 0.0), np.full(n, 1.5), rng.uniform(0.3, 1.0, n))
-    idx = np.arange(n)
-    b = Bsdf.from_table(table, idx, nrm, nrm)
     x = rng.random((n, 3)) * 6.0 - 3.0
-
-    def eval_f(i, wi):
-        return b.subset(i).eval(wo[i], wi)
-    return ShadingPoints(x, nrm, wo, bsdf_max_value(table, idx), eval_f,
-                         lambda i, q, qn: np.ones(len(i), bool), transmissive=np.ones(n, bool),
-                         glossy=GlossyReceivers.from_bsdf(b, wo, nrm))
+    return receiver_points(table, x, nrm, wo, transmissive=np.ones(n, bool))
 
 
 @pytest.mark.parametrize("backend", ["numba", "numpy"])
@@ -296,7 +284,6 @@ def test_cluster_bound_dominates_every_member_at_translucent_receivers(backend):
     from ercuts_core import kernels
     from ercuts_core.integrators.ercuts.light_tree import build_light_tree
     from tests.test_glossy_bound import bound_table, violations, worst_member
-    from tests.vpl_cases import random_vpls
     if backend == "numba" and not kernels.NUMBA:
         pytest.skip("numba not available")
     lights = random_vpls(400, 71, scale=8.0, shift=-4.0)
@@ -317,7 +304,6 @@ def test_lightcut_matches_numpy_at_translucent_receivers():
     from ercuts_core import kernels
     from ercuts_core.integrators.ercuts.light_tree import build_light_tree
     from ercuts_core.integrators.ercuts.lightcuts import lightcut
-    from tests.vpl_cases import random_vpls
     if not kernels.NUMBA:
         pytest.skip("numba not available")
     pos, nrm, inten = random_vpls(1500, 6, scale=8.0, shift=-4.0)

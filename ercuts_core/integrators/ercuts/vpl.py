@@ -346,6 +346,48 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
     return (total, total2) if moments else total
 
 
+#: A second-stage Ê1 whose own relative variance (of the mean) exceeds this is *shaky*: it
+#: rests on a few hits (std. error > 50 %, fewer than ≈ 4 hits of similar value) and 1/Ê1 has
+#: a heavy tail — one VPL of Veach's room with 16 samples had Ê1 = 8.7e-5 against a true 14.9
+#: and made the image 6.9× too bright. Such estimates get :func:`_pool_shaky`'s extra samples.
+SHAKY_RELATIVE_VARIANCE = 0.25
+#: The shaky VPLs' extra samples together: at most this share of the second stage's budget
+#: (each gets that budget's share of it, between ``n_samples`` and ``max_factor``·``n_samples``).
+SHAKY_BUDGET = 0.25
+
+
+def _pool_shaky(scene: BuiltScene, pos: NDArray, normal: NDArray, color: NDArray, gmax: float,
+                counts: NDArray, e1: NDArray, e1_sq: NDArray, c: NDArray, extra: tuple,
+                rng: np.random.Generator, chunk: int, keep_going, clear_receivers: bool):
+    """Ê1 of the shaky VPLs (:data:`SHAKY_RELATIVE_VARIANCE`) pooled with fresh samples:
+    ``extra`` = (least, most, total): each shaky VPL gets total/(their number) samples,
+    clipped to [least, most].
+
+    ``e1``, ``e1_sq`` (V,): the second stage's means of the samples and of their squares over
+    ``counts`` (V,) samples; ``c`` (V,): the pilot's relative variance. The shaky VPLs' extra
+    samples are pooled with their second-stage ones (the mean over counts + hi samples, not
+    the extra ones alone: the decision depends on the second stage, and pooling keeps the
+    conditional bias of that choice at counts/(counts + hi) of it); ``counts`` is raised to
+    the pooled number in place and their ``c`` becomes the second stage's (the Jensen
+    correction's: independent of the extra samples, not of the pooled ones — second order).
+    Returns (e1, c)."""
+    n = np.maximum(counts, 1).astype(np.float64)
+    hit = e1 > 0
+    c2 = np.where(hit, np.maximum(e1_sq - e1 * e1, 0.0) / np.where(hit, e1 * e1, 1.0), 0.0)
+    shaky = np.flatnonzero(hit & (c2 / n > SHAKY_RELATIVE_VARIANCE))
+    if len(shaky) == 0 or (keep_going is not None and not keep_going(0.0)):
+        return e1, c
+    least, most, total = extra
+    m = int(np.clip(total / len(shaky), least, most))
+    more = estimate_e1_light_tracing(scene, pos[shaky], normal[shaky], color[shaky], gmax, m, rng, chunk,
+                                     keep_going, clear_receivers=clear_receivers)
+    e1, c = e1.copy(), c.copy()
+    e1[shaky] = (n[shaky] * e1[shaky] + m * more) / (n[shaky] + m)
+    c[shaky] = c2[shaky]
+    counts[shaky] = counts[shaky] + m
+    return e1, c
+
+
 #: Divide out the first-order Jensen bias of 1/Ê1 with the pilot's relative variance
 #: (:func:`estimate_e1_allocated`); False = the ablation. Measured ``vpl_energy_ratio`` at
 #: 64×48 (brute-force gather), without → with: S-corridor seeds 1–3 1.061/1.031/1.028 →
@@ -415,8 +457,12 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
             else:
                 hi_t = t
         counts = np.clip(lo_t * want, n1, hi).astype(np.int64)
-    e1 = estimate_e1_light_tracing(scene, pos, normal, color, gmax, counts, rng, chunk, stage(f1, 1.0),
-                                   clear_receivers=clear_receivers)
+    e1, e1_sq = estimate_e1_light_tracing(scene, pos, normal, color, gmax, counts, rng, chunk,
+                                          stage(f1, 0.9), moments=True, clear_receivers=clear_receivers)
+    if not stop[0]:
+        e1, c = _pool_shaky(scene, pos, normal, color, gmax, counts, e1, e1_sq, c,
+                            (n_samples, hi, SHAKY_BUDGET * budget), rng, chunk, stage(0.9, 1.0),
+                            clear_receivers)
     if JENSEN_CORRECTION:
         # E[1/Ê1] ≈ (1/E1)(1 + c_v/N_v) (delta method); the pilot's ĉ_v is independent of
         # the second stage, so (1/Ê1)(1 − ĉ_v/N_v) is unbiased to second order.

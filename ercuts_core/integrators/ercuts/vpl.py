@@ -412,8 +412,9 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
     allocation depends on the pilot only). VPLs whose pilot found nothing get the most.
     With :data:`JENSEN_CORRECTION` the estimate is returned as Ê1/(1 − ĉ_v/N_v) (ĉ_v/N_v
     capped at 0.5), so its reciprocal (1/Ê1)(1 − ĉ_v/N_v) loses the first-order bias: ĉ_v
-    comes from the pilot, independent of the second-stage samples (delta method).
-    ``keep_going`` and ``clear_receivers`` as in :func:`estimate_e1_light_tracing` (fractions
+    comes from the pilot, independent of the second-stage samples (delta method). A
+    second-stage estimate resting on a few hits is pooled with extra samples first
+    (:func:`_pool_shaky`). ``keep_going`` and ``clear_receivers`` as in :func:`estimate_e1_light_tracing` (fractions
     over both stages).
     """
     V = len(pos)

@@ -357,35 +357,32 @@ SHAKY_BUDGET = 0.25
 
 
 def _pool_shaky(scene: BuiltScene, pos: NDArray, normal: NDArray, color: NDArray, gmax: float,
-                counts: NDArray, e1: NDArray, e1_sq: NDArray, c: NDArray, extra: tuple,
-                rng: np.random.Generator, chunk: int, keep_going, clear_receivers: bool):
-    """Ê1 of the shaky VPLs (:data:`SHAKY_RELATIVE_VARIANCE`) pooled with fresh samples:
-    ``extra`` = (least, most, total): each shaky VPL gets total/(their number) samples,
-    clipped to [least, most].
+                counts: NDArray, e1: NDArray, e1_sq: NDArray, c: NDArray, extra: tuple[int, int, float],
+                rng: np.random.Generator, chunk: int, keep_going, clear_receivers: bool) -> None:
+    """Pool the shaky VPLs' Ê1 (:data:`SHAKY_RELATIVE_VARIANCE`) with m fresh samples each, in
+    place: ``extra`` = (least, most, total), m = total / (number of shaky VPLs) clipped to
+    [least, most].
 
     ``e1``, ``e1_sq`` (V,): the second stage's means of the samples and of their squares over
-    ``counts`` (V,) samples; ``c`` (V,): the pilot's relative variance. The shaky VPLs' extra
-    samples are pooled with their second-stage ones (the mean over counts + hi samples, not
-    the extra ones alone: the decision depends on the second stage, and pooling keeps the
-    conditional bias of that choice at counts/(counts + hi) of it); ``counts`` is raised to
-    the pooled number in place and their ``c`` becomes the second stage's (the Jensen
-    correction's: independent of the extra samples, not of the pooled ones — second order).
-    Returns (e1, c)."""
+    ``counts`` (V,) samples; ``c`` (V,): the pilot's relative variance. A shaky VPL's Ê1
+    becomes the mean over its counts + m samples (not the m alone: the decision depends on
+    the second stage, and pooling keeps the conditional bias of that choice at
+    counts/(counts + m) of it), its count counts + m, and its ``c`` the second stage's (the
+    Jensen correction's: independent of the extra samples, not of the pooled ones — second
+    order)."""
     n = np.maximum(counts, 1).astype(np.float64)
     hit = e1 > 0
     c2 = np.where(hit, np.maximum(e1_sq - e1 * e1, 0.0) / np.where(hit, e1 * e1, 1.0), 0.0)
     shaky = np.flatnonzero(hit & (c2 / n > SHAKY_RELATIVE_VARIANCE))
     if len(shaky) == 0 or (keep_going is not None and not keep_going(0.0)):
-        return e1, c
+        return
     least, most, total = extra
     m = int(np.clip(total / len(shaky), least, most))
     more = estimate_e1_light_tracing(scene, pos[shaky], normal[shaky], color[shaky], gmax, m, rng, chunk,
                                      keep_going, clear_receivers=clear_receivers)
-    e1, c = e1.copy(), c.copy()
     e1[shaky] = (n[shaky] * e1[shaky] + m * more) / (n[shaky] + m)
     c[shaky] = c2[shaky]
-    counts[shaky] = counts[shaky] + m
-    return e1, c
+    counts[shaky] += m
 
 
 #: Divide out the first-order Jensen bias of 1/Ê1 with the pilot's relative variance
@@ -414,8 +411,8 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
     capped at 0.5), so its reciprocal (1/Ê1)(1 − ĉ_v/N_v) loses the first-order bias: ĉ_v
     comes from the pilot, independent of the second-stage samples (delta method). A
     second-stage estimate resting on a few hits is pooled with extra samples first
-    (:func:`_pool_shaky`). ``keep_going`` and ``clear_receivers`` as in :func:`estimate_e1_light_tracing` (fractions
-    over both stages).
+    (:func:`_pool_shaky`). ``keep_going`` and ``clear_receivers`` as in
+    :func:`estimate_e1_light_tracing` (fractions over both stages).
     """
     V = len(pos)
     n1 = max(4, int(round(n_samples * pilot)))
@@ -461,9 +458,8 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
     e1, e1_sq = estimate_e1_light_tracing(scene, pos, normal, color, gmax, counts, rng, chunk,
                                           stage(f1, 0.9), moments=True, clear_receivers=clear_receivers)
     if not stop[0]:
-        e1, c = _pool_shaky(scene, pos, normal, color, gmax, counts, e1, e1_sq, c,
-                            (n_samples, hi, SHAKY_BUDGET * budget), rng, chunk, stage(0.9, 1.0),
-                            clear_receivers)
+        _pool_shaky(scene, pos, normal, color, gmax, counts, e1, e1_sq, c,
+                    (n_samples, hi, SHAKY_BUDGET * budget), rng, chunk, stage(0.9, 1.0), clear_receivers)
     if JENSEN_CORRECTION:
         # E[1/Ê1] ≈ (1/E1)(1 + c_v/N_v) (delta method); the pilot's ĉ_v is independent of
         # the second stage, so (1/Ê1)(1 − ĉ_v/N_v) is unbiased to second order.

@@ -221,13 +221,13 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         name="Stochastic Cut Size",
         description=("Light-tree nodes per shading point of the Stochastic Lightcuts gather, "
                      "each evaluated with one virtual point light drawn for the point"),
-        default=_default("stochastic_cut_size", 32), min=1, soft_max=1024,
+        default=_default("stochastic_cut_size", 256), min=1, soft_max=1024,
     )
     stochastic_passes: IntProperty(
         name="Stochastic Passes",
         description=("Passes of the Stochastic Lightcuts gather per iteration (new lights drawn in "
                      "each), averaged"),
-        default=_default("stochastic_passes", 8), min=1, soft_max=256,
+        default=_default("stochastic_passes", 2), min=1, soft_max=256,
     )
     stochastic_cut_sharing: IntProperty(
         name="Cut Sharing",

@@ -168,8 +168,8 @@ class RenderSettings:
     multichain_perturbation: bool = True
     bidirectional_mutation: bool = True
     max_cut_size: int = 1000
-    stochastic_cut_size: int = 32
-    stochastic_passes: int = 8
+    stochastic_cut_size: int = 256
+    stochastic_passes: int = 2
     stochastic_cut_sharing: int = 4
     clamp: float = 0.02
     gather: str = "STOCHASTIC"

@@ -31,6 +31,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+import metrics  # noqa: E402  (benchmarks/metrics.py: the relMSE regulariser)
 import report  # noqa: E402  (benchmarks/report.py: the scenes)
 from ercuts_core import RenderSettings, render  # noqa: E402
 from ercuts_core.integrators.ercuts import gather  # noqa: E402
@@ -38,8 +39,6 @@ from ercuts_core.sampling import luminance  # noqa: E402
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "stochastic_cut.md")
 SCENES = ["door_ajar", "s_corridor", "baffled_lamp", "cornell_box", "veach_room", "textured_living_room"]
-#: relMSE regulariser (benchmarks/metrics.py).
-EPS = 0.01
 
 
 def measure(scene: str, sizes: list[int], repeats: int, batches: range) -> dict[int, tuple[float, float]]:
@@ -61,7 +60,7 @@ def measure(scene: str, sizes: list[int], repeats: int, batches: range) -> dict[
             m = np.mean([y.mean(axis=0) for y in ys.values()], axis=0)
             for c in sizes:
                 a = acc[c]
-                a[0] += float((ys[c].var(axis=0, ddof=1) / (m * m + EPS)).sum())
+                a[0] += float((ys[c].var(axis=0, ddof=1) / (m * m + metrics.EPS)).sum())
                 a[1] += secs[c]
                 a[2] += m.size
         return original(tree, pos, nrm, inten, pts, rng, cut_size=cut_size, clamp=clamp, cdf=cdf, ref=ref)

@@ -11,7 +11,12 @@ which converges to the optimum allocation of a budget between independent estima
 costs, n_i ∝ σ_i/√τ_i (Neyman's allocation with costs; Cochran, *Sampling Techniques*, 3rd
 ed. 1977, §5.5). E is measured from the passes' own spread (the sample variance of every
 pixel over the passes, :class:`PassVariance`) and weighted like the benchmarks' relMSE,
-Σ_p var_p / (Y_p² + 0.01) / N_pixels with Y_p the pixel's current luminance.
+Σ_p var_p / (Y_p² + 0.01) / N_pixels with Y_p the pixel's current luminance. After its first
+pass the gather's spread is not known yet; in the iteration that fills the render's time a
+probe (the pass drawn again at a spread 2 % of the points, :meth:`PassVariance.probe`) gives
+it, so the direct passes can compete for the time of the gather's second pass already: with
+256-node cuts two gather passes took all of an iteration's spare time in Veach's room at 30 s
+(9 direct samples instead of 29; relMSE 0.034 with, 0.015 without that wait).
 
 Why it matters: a mirror or a glass pane that throws the light of a bright wall onto the room
 (paths the direct passes path-trace) makes the direct passes' variance dwarf the gather's,
@@ -41,6 +46,16 @@ class PassVariance:
         self.count = 0
         self.s1 = np.zeros(n)
         self.s2 = np.zeros(n)
+        self._probe: tuple[NDArray, NDArray, float] | None = None
+
+    def probe(self, pixels: NDArray, a: NDArray, b: NDArray, share: float) -> None:
+        """The per-pass variance before a second pass, from a probe: two independent draws
+        ``a``, ``b`` (k,) of the pass at ``pixels`` (k,), a spread subsample of ``share`` of
+        the image's pixels (the others have no variance: no surface, nothing to gather).
+        (a − b)²/2 is an unbiased estimate of a pixel's per-pass variance, and their mean over
+        the subsample of the image's mean (:meth:`error`)."""
+        d = np.asarray(a, np.float64) - np.asarray(b, np.float64)
+        self._probe = (np.asarray(pixels), 0.5 * d * d, share)
 
     def add(self, y: NDArray) -> None:
         """One more pass: ``y`` (n,) the pixels' luminance in it."""
@@ -55,8 +70,12 @@ class PassVariance:
 
     def error(self, ref: NDArray) -> float:
         """The relMSE-weighted variance of the pixels' means, mean_p var_p / n / (ref_p² +
-        :data:`REL_EPS`) (inf before two passes: the spread is unknown)."""
+        :data:`REL_EPS`) (after one pass from the :meth:`probe`, else inf before two passes:
+        the spread is unknown)."""
         n = self.count
+        if n == 1 and self._probe is not None:
+            pix, var, share = self._probe
+            return share * float(np.mean(var / (np.asarray(ref)[pix] ** 2 + REL_EPS)))
         if n < 2:
             return np.inf
         m = self.s1 / n

@@ -37,6 +37,12 @@ GLOSSY_ROUGHNESS = 0.5
 ERROR_MODES = {"NODE": "bound", "TOTAL": "total", "LITERAL": "literal"}
 #: Seed salt of the stochastic gather's draws (with the seed, the pass and the batch start).
 PASS_SALT = 0x5C7
+#: The variance probe after the first stochastic gather pass (:meth:`Gather._probe`): at
+#: least this many points, or this share of them if more (2 % of a pass's time) …
+PROBE_POINTS = 2048
+PROBE_SHARE = 0.02
+#: … drawn with this pass index (independent of every real pass's draws).
+PROBE_PASS = 1 << 20
 #: Another stochastic gather pass starts only if the iteration's time left is at least this
 #: share of the first pass's duration (a pass the time cuts short keeps the points it reached).
 PASS_START = 0.1
@@ -149,7 +155,9 @@ class Gather:
         holds them when the iteration fills its time, asked again after every pass: once the
         passes are done, time that no later iteration would use goes into more passes — or,
         pass by pass, into more direct-light passes of ``rival`` when that lowers the image's
-        error more per second, :mod:`.balance`), each point's estimate the mean of its passes.
+        error more per second, :mod:`.balance`; in an iteration that fills its time the rival
+        competes from the first pass on, after a variance probe, :meth:`_probe`), each point's
+        estimate the mean of its passes.
         A pass the iteration's time cuts short keeps the points it reached (spread over
         the image by :func:`spread_order`): each pass is an unbiased estimate per point, so a
         mean over 1 or 2 passes is too. Returns the mean (2, Q, 3) and the passes made
@@ -159,9 +167,10 @@ class Gather:
         total, count, passes = L.copy(), np.ones(len(self.g.pixel)), 1.0
         spread = PassVariance(n_pixels)
         spread.add(_pixel_luminance(L, n_pixels, S))
+        early = rival is not None and schedule.fills_time() and self._probe(sweep, L, spread)
         while (passes < s.stochastic_passes or schedule.fills_time()) and not schedule.clock.cancelled \
                 and schedule.remaining() > PASS_START * t_pass:
-            if rival is not None and passes >= s.stochastic_passes \
+            if rival is not None and (passes >= s.stochastic_passes or early) \
                     and schedule.remaining() > RIVAL_START * rival.seconds:
                 ref = spread.mean() + rival.variance.mean()
                 if rival.gain(ref) > spread.gain(ref, t_pass):
@@ -180,6 +189,24 @@ class Gather:
             spread.add(_pixel_luminance(L2, n_pixels, S))
             t_pass = 0.5 * (t_pass + time.perf_counter() - t0)
         return total / count[None, :, None], passes
+
+    def _probe(self, sweep: "_Sweep", L: NDArray, spread: PassVariance) -> bool:
+        """Draw the first pass again at a spread subsample of its points (:data:`PROBE_POINTS`,
+        :data:`PROBE_SHARE`, a few % of a pass) so that ``spread`` knows the gather's variance
+        before its second pass, and the direct-light passes may compete for the time of that
+        one already (:mod:`.balance`). False when it was cut short."""
+        S, n_pts = self.g.samples, len(sweep.pts_all)
+        k = min(n_pts, max(PROBE_POINTS, int(PROBE_SHARE * n_pts)))
+        L2, done = sweep.probe(k)
+        if done < k or k == 0:
+            return False
+        pts = sweep.pts_all[:k]
+        pix = self.g.pixel[pts]
+        n_pixels = len(self.g.pixel) // S
+        # per pixel and pass the S points' mean: a point's variance / S
+        a, b = (luminance(x[:, pts].sum(axis=0)) / np.sqrt(S) for x in (L, L2))
+        spread.probe(pix, a, b, n_pts / S / n_pixels)
+        return True
 
     def _glossy(self, gathered: NDArray) -> NDArray:
         """(Q,) shading points with a specular lobe of roughness < :data:`GLOSSY_ROUGHNESS`,
@@ -291,6 +318,17 @@ class _Sweep:
             self.stats["gather_incomplete"] = 1
             self.schedule.clock.cancelled = True
         return L, cut, done_pt, done
+
+    def probe(self, k: int) -> tuple[NDArray, int]:
+        """Pass :data:`PROBE_PASS` (independent draws) over the first ``k`` of ``pts_all``
+        only: ((2, Q, 3) light parts, points done)."""
+        full = self.pts_all
+        self.pts_all = full[:k]
+        try:
+            L, _, _, done = self.run(PROBE_PASS, lambda parts, c: None)
+        finally:
+            self.pts_all = full
+        return L, done
 
     def _batch(self, idx: NDArray, start: int, pass_index: int, L: NDArray, cut: NDArray) -> bool:
         """Gather the points ``idx`` into ``L`` and ``cut``; False when a cancel abandoned

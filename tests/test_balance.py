@@ -1,0 +1,125 @@
+"""Spare time between the stochastic gather's passes and the direct-light passes
+(:mod:`ercuts_core.integrators.ercuts.balance`): the passes' spread, the probe that measures the
+gather's variance after its first pass, and the choice between the two pass by pass."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+
+from ercuts_core.integrators.ercuts.balance import REL_EPS, DirectRival, PassVariance
+from ercuts_core.integrators.ercuts.gather import Gather
+
+
+def _expected(sigma: NDArray, ref: NDArray, n: int) -> float:
+    return float(np.mean(sigma**2 / n / (ref**2 + REL_EPS)))
+
+
+def test_pass_spread_estimates_the_variance_of_the_mean():
+    """After n passes, error() is mean_p σ_p²/n/(ref_p² + ε) (the sample variance is
+    unbiased). Tolerance: with m pixels the relative standard error of the mean of m
+    (n−1)-degree χ² variances is √(2/((n−1)m)) ≈ 0.4 % for n = 8, m = 20 000; 5σ."""
+    rng = np.random.default_rng(1)
+    m, n = 20_000, 8
+    mu = rng.uniform(0.1, 2.0, m)
+    sigma = 0.3 * mu
+    v = PassVariance(m)
+    assert v.error(mu) == np.inf                  # nothing known yet
+    v.add(mu + sigma * rng.standard_normal(m))
+    assert v.error(mu) == np.inf                  # one pass, no probe: spread unknown
+    for _ in range(n - 1):
+        v.add(mu + sigma * rng.standard_normal(m))
+    want = _expected(sigma, mu, n)
+    assert v.error(mu) == pytest.approx(want, rel=5 * np.sqrt(2 / ((n - 1) * m)))
+    assert v.gain(mu, 2.0) == pytest.approx(v.error(mu) / (n + 1) / 2.0)
+
+
+def test_probe_estimates_one_pass_variance_from_a_subsample():
+    """The probe: two independent draws at k of the image's pixels (a share of them; the
+    others have nothing to gather). (a − b)²/2 per pixel is unbiased for σ²; the mean over
+    k pixels estimates the image's mean (relative standard error √2/√k for equal weights:
+    2.2 % at k = 4096; 5σ). A wrong factor (no 1/2, or no share) fails."""
+    rng = np.random.default_rng(2)
+    n_pixels, share = 40_000, 0.5
+    ref = np.zeros(n_pixels)
+    lit = rng.permutation(n_pixels)[: int(share * n_pixels)]      # the pixels with a surface
+    ref[lit] = rng.uniform(0.5, 1.5, len(lit))
+    sigma = np.zeros(n_pixels)
+    sigma[lit] = 0.2 * ref[lit]
+    k = 4096
+    pix = lit[:k]
+    a = ref[pix] + sigma[pix] * rng.standard_normal(k)
+    b = ref[pix] + sigma[pix] * rng.standard_normal(k)
+    v = PassVariance(n_pixels)
+    v.add(ref + sigma * rng.standard_normal(n_pixels))
+    v.probe(pix, a, b, share)
+    want = _expected(sigma, ref, 1)
+    assert v.error(ref) == pytest.approx(want, rel=5 * np.sqrt(2 / k))
+    v.add(ref + sigma * rng.standard_normal(n_pixels))  # from two passes on: their spread
+    assert v.error(ref) == pytest.approx(_expected(sigma, ref, 2), rel=0.05)
+
+
+def _gather_and_rival(sigma_gather: float, sigma_direct: float, fills: bool, passes_asked: int = 2):
+    """A mock gather (passes of 1 s, per-point noise ``sigma_gather``, probe included) and a
+    direct rival (passes of 1 s, noise ``sigma_direct``, 8 passes so far) over Q pixels, one
+    point each; the iteration has 6 s left."""
+    Q = 4096
+    rng = np.random.default_rng(3)
+    state = {"left": 6.0, "gather": 0, "probe": 0}
+
+    def draw():
+        return 1.0 + sigma_gather * rng.standard_normal((2, Q, 3)) / 2
+
+    def run(k, show):
+        state["left"] -= 1.0
+        state["gather"] += 1
+        return draw(), None, None, Q
+
+    def probe(k):
+        state["left"] -= 0.02
+        state["probe"] += 1
+        return draw(), k
+
+    direct = PassVariance(Q)
+    for _ in range(8):
+        direct.add(1.0 + sigma_direct * rng.standard_normal(Q))
+
+    def one_more():
+        state["left"] -= 1.0
+        direct.add(1.0 + sigma_direct * rng.standard_normal(Q))
+        return True
+
+    rival = DirectRival(one_more, direct, 1.0)
+    sweep = SimpleNamespace(pts_all=np.arange(Q), run=run, probe=probe)
+    schedule = SimpleNamespace(fills_time=lambda: fills, remaining=lambda: state["left"],
+                               clock=SimpleNamespace(cancelled=False))
+    gather = SimpleNamespace(settings=SimpleNamespace(stochastic_passes=passes_asked),
+                             g=SimpleNamespace(pixel=np.arange(Q), samples=1))
+    gather._probe = lambda sw, L, spread: Gather._probe(gather, sw, L, spread)
+    L0 = draw()
+    _, passes = Gather._more_passes(gather, sweep, L0, 1.0, schedule, lambda *a: None,
+                                    np.ones(Q, bool), rival)
+    return passes, rival, state
+
+
+def test_direct_passes_take_the_second_gather_pass_when_they_are_noisier():
+    """In an iteration that fills its time, the probe after the first gather pass tells the
+    balance the gather's variance, so a far noisier direct estimate (a mirror room's) gets
+    the time of the gather's second pass already; before the probe it waited for
+    ``stochastic_passes`` gather passes (Veach's room at 30 s: 1.9 gather passes, 9 direct
+    samples instead of 29)."""
+    passes, rival, state = _gather_and_rival(sigma_gather=0.05, sigma_direct=1.0, fills=True)
+    assert state["probe"] == 1
+    assert passes == 1.0 and rival.extra >= 4            # every further second went direct
+    # the gather noisier: it keeps its passes, the rival gets nothing
+    passes, rival, state = _gather_and_rival(sigma_gather=1.0, sigma_direct=0.05, fills=True)
+    assert passes >= 5 and rival.extra == 0
+
+
+def test_no_probe_and_no_competition_while_later_iterations_follow():
+    """An iteration that does not fill its time makes exactly ``stochastic_passes`` gather
+    passes, with no probe and no direct passes taken from it, however noisy those are."""
+    passes, rival, state = _gather_and_rival(sigma_gather=0.05, sigma_direct=1.0, fills=False)
+    assert passes == 2 and rival.extra == 0 and state["probe"] == 0

@@ -67,14 +67,13 @@ def _gather_and_rival(sigma_gather: float, sigma_direct: float, fills: bool, pas
     point each; the iteration has 6 s left."""
     Q = 4096
     rng = np.random.default_rng(3)
-    state = {"left": 6.0, "gather": 0, "probe": 0}
+    state = {"left": 6.0, "probe": 0}
 
     def draw():
         return 1.0 + sigma_gather * rng.standard_normal((2, Q, 3)) / 2
 
     def run(k, show):
         state["left"] -= 1.0
-        state["gather"] += 1
         return draw(), None, None, Q
 
     def probe(k):

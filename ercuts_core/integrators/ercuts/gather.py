@@ -283,10 +283,12 @@ class _Sweep:
                           f"Lightcuts {100 * f:.0f}% | {self.rays / 1e6:.2f}M shadow rays") \
             and clock.remaining() > 0 and (not within_iteration or self.schedule.remaining() > 0)
 
-    def run(self, pass_index: int, show) -> tuple[NDArray, NDArray, NDArray, int]:
-        """Gather pass ``pass_index``: (2, Q, 3) light parts, (Q,) cut sizes, (Q,) points
-        done and the number of ``pts_all`` done (fewer when stopped)."""
-        ga, s, pts_all = self.gather, self.gather.settings, self.pts_all
+    def run(self, pass_index: int, show, count: int | None = None) -> tuple[NDArray, NDArray, NDArray, int]:
+        """Gather pass ``pass_index`` over ``pts_all`` (its first ``count`` only, if given):
+        (2, Q, 3) light parts, (Q,) cut sizes, (Q,) points done and the number of those
+        points done (fewer when stopped)."""
+        ga, s = self.gather, self.gather.settings
+        pts_all = self.pts_all if count is None else self.pts_all[:count]
         self.pass_index = pass_index
         g = ga.g
         Q, S = len(g.pixel), g.samples
@@ -322,12 +324,7 @@ class _Sweep:
     def probe(self, k: int) -> tuple[NDArray, int]:
         """Pass :data:`PROBE_PASS` (independent draws) over the first ``k`` of ``pts_all``
         only: ((2, Q, 3) light parts, points done)."""
-        full = self.pts_all
-        self.pts_all = full[:k]
-        try:
-            L, _, _, done = self.run(PROBE_PASS, lambda parts, c: None)
-        finally:
-            self.pts_all = full
+        L, _, _, done = self.run(PROBE_PASS, lambda parts, c: None, count=k)
         return L, done
 
     def _batch(self, idx: NDArray, start: int, pass_index: int, L: NDArray, cut: NDArray) -> bool:

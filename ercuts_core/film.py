@@ -21,6 +21,10 @@ from .camera import Window
 
 #: Light-pass AOV names, indexed by path class (scattering vertices, clamped to 2).
 LIGHT_PASSES = ("emission", "direct", "indirect")
+#: :meth:`Film._add` bincounts over the span of the pixel indices when it is at most this many
+#: times the number of samples, else adds them one by one (``np.add.at``: 0.08 ms per 4096
+#: samples and channel, a 2-M-pixel bincount 3.6 ms).
+ADD_SPAN = 4
 
 
 def path_class(n_scatter: NDArray) -> NDArray:
@@ -72,13 +76,24 @@ class Film:
         return L, parts
 
     def _add(self, target: NDArray, pix: NDArray, values: NDArray) -> None:
-        """target[pix] += values with repeated indices (bincount per channel is fastest)."""
-        n = len(target)
-        if values.ndim == 1:
-            target += np.bincount(pix, weights=values, minlength=n)
+        """target[pix] += values with repeated indices, in time proportional to the samples,
+        not the film: a bincount per channel over the span of ``pix`` when the samples fill
+        it (a batch of camera samples: consecutive pixels), else an unbuffered ``np.add.at``
+        per channel (scattered splats). A bincount over the whole film per batch made a pass
+        quadratic in the pixel count: 1.35 s per 640×480 direct-light pass, 60 s at
+        1920×1080 (door scene, 4096-pixel batches; :data:`ADD_SPAN`)."""
+        if len(pix) == 0:
             return
-        for c in range(values.shape[1]):
-            target[:, c] += np.bincount(pix, weights=values[:, c], minlength=n)
+        lo, hi = int(pix.min()), int(pix.max()) + 1
+        cols = [(target, values)] if values.ndim == 1 else \
+            [(target[:, c], values[:, c]) for c in range(values.shape[1])]
+        if hi - lo > ADD_SPAN * len(pix):
+            for t, v in cols:
+                np.add.at(t, pix, v)
+            return
+        local = pix - lo
+        for t, v in cols:
+            t[lo:hi] += np.bincount(local, weights=v, minlength=hi - lo)
 
     def add_samples(self, pix: NDArray, L: NDArray, alpha: NDArray, parts: NDArray | None = None) -> None:
         """Accumulate camera samples: ``pix`` (N,) window pixel index, ``L`` (N, 3), ``alpha`` (N,);

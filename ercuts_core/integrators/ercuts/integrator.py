@@ -483,8 +483,9 @@ class ErcutsIntegrator:
         window = self.scene.camera.window
         rough = self.rough
 
-        def show(point_parts, complete):
+        def show(point_parts, done):
             def image():
+                complete = done.reshape(-1, g.samples).all(axis=1)
                 parts = self._compose(base, per_pixel_parts(point_parts, g.samples), None, 1.0)
                 fallback = rough.full_film().light_parts()
                 return _rgba(window, np.where(complete[None, :, None], parts, fallback), alpha)

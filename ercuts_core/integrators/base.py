@@ -120,8 +120,9 @@ def run_passes(integrator: "Integrator", film: Film, clock: Clock, *, samples: i
     ``"{phase} sample k/samples"`` at ``fraction(f)`` of the render, f being the phase's
     fraction done (with a ``deadline``, at least its share of the time used). Stops after a
     pass once ``deadline`` is past (the first pass always completes unless cancelled; a second
-    is not forced: at 1080p one direct-light pass takes ≈ 40 s, and a forced second one left
-    the later phases of a 120 s render no time).
+    is not forced: a 1080p direct-light pass took ≈ 40 s when the film's accumulation was
+    quadratic in pixels (≈ 6 s since), and a forced second one left the later phases of a
+    120 s render no time).
     ``show``: send the merged image to the preview after each pass. ``first``: index of the
     first pass (its random streams; a later call continues a film's passes with new ones).
     ``on_pass(part)``: called with every complete pass's own film before it is merged.

@@ -111,8 +111,9 @@ class Gather:
             rival: DirectRival | None = None) -> Gathered:
         """VPL light at every shading point; ``show(point_parts, done)`` after every batch
         (preview; ``done`` (Q,) the points gathered, for the caller to reduce to pixels only
-        when a preview is due: per batch, that reduction alone cost ≈ 4 s per 1080p pass). ``rival``: the direct-light passes, which may take spare time instead of
-        further gather passes (:mod:`.balance`).
+        when a preview is due: per batch, that reduction alone cost ≈ 4 s per 1080p pass).
+        ``rival``: the direct-light passes, which may take spare time instead of further
+        gather passes (:mod:`.balance`).
 
         Cancelling (or running out of time) stops after the current batch; a cancel during a
         lightcut batch stops its refinement, so the batch keeps coarser but complete cuts.
@@ -292,7 +293,7 @@ class _Sweep:
         pts_all = self.pts_all if count is None else self.pts_all[:count]
         self.pass_index = pass_index
         g = ga.g
-        Q, S = len(g.pixel), g.samples
+        Q = len(g.pixel)
         L = np.zeros((2, Q, 3))              # [from emitter VPLs, from the others]
         cut = np.zeros(Q)
         done_pt = ~g.valid                   # misses need no gather

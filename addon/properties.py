@@ -236,6 +236,14 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
                      "their own. Each point still draws its own lights (unbiased)"),
         default=_default("stochastic_cut_sharing", 4), min=1, soft_max=16,
     )
+    gather_spacing: IntProperty(
+        name="Gather Spacing",
+        description=("Gather the virtual point lights at one pixel in k x k and interpolate the "
+                     "others where the surface is smooth, diffuse or rough (edges, glossy surfaces "
+                     "and what mirrors show are gathered everywhere). 1 = every pixel; "
+                     "0 = automatic: 2 from 1280x720"),
+        default=_default("gather_spacing", 0), min=0, soft_max=4,
+    )
     clamp: FloatProperty(
         name="VPL Clamp",
         description=("Virtual point light clamp: minimum distance as a fraction of the scene's "

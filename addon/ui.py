@@ -136,6 +136,7 @@ class ERCUTS_RENDER_PT_ercuts(ErcutsPanel, bpy.types.Panel):
         col.prop(settings, "stochastic_cut_size")
         col.prop(settings, "stochastic_passes")
         col.prop(settings, "stochastic_cut_sharing")
+        col.prop(settings, "gather_spacing")
         col = layout.column(align=True)
         col.prop(settings, "chains_per_pixel")
         col.prop(settings, "max_chains")

@@ -103,6 +103,12 @@ class RenderSettings:
             point whose normal, plane or material differs keeps its own (edges). Each point
             still draws its own VPLs, so the estimate stays unbiased (module
             :mod:`~ercuts_core.integrators.ercuts.stochastic_lightcuts`).
+        gather_spacing: the gather runs at one pixel in k×k (k = ``gather_spacing``; the
+            grid shifts per iteration) and at every point that cannot be interpolated (edges,
+            glossy or transmissive surfaces, what mirrors show); the other points interpolate
+            their anchors' light where the G-buffer is smooth, scaled by the ratio of the
+            reflectances (:mod:`~ercuts_core.integrators.ercuts.interpolation`). 1 = every
+            point gathered; 0 (default) = automatic: 2 from 800 000 pixels (1280×720 and up).
         gather: 'STOCHASTIC' (default; stochastic lightcuts, Yuksel 2019: a cut of
             ``stochastic_cut_size`` nodes, each evaluated with one VPL drawn per shading point;
             unbiased for the VPLs, no error bound — its error is noise that the passes and
@@ -171,6 +177,7 @@ class RenderSettings:
     stochastic_cut_size: int = 256
     stochastic_passes: int = 2
     stochastic_cut_sharing: int = 4
+    gather_spacing: int = 0
     clamp: float = 0.02
     gather: str = "STOCHASTIC"
     lightcut_error: str = "TOTAL"
@@ -217,6 +224,8 @@ class RenderSettings:
                self.shading_samples, self.e1_samples, self.direct_samples) < 1:
             raise ValueError("max_cut_size, stochastic_cut_size, stochastic_passes, stochastic_cut_sharing, "
                              "shading_samples, e1_samples and direct_samples must be >= 1")
+        if self.gather_spacing < 0:
+            raise ValueError(f"gather_spacing must be >= 0 (0 = automatic), got {self.gather_spacing}")
         if self.clamp < 0:
             raise ValueError(f"clamp must be >= 0, got {self.clamp}")
         if self.memory_budget_mb < 0:

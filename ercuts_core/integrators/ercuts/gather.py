@@ -19,6 +19,7 @@ from ...sampling import luminance
 from ...scene import BuiltScene
 from ...settings import RenderSettings
 from .balance import DirectRival, PassVariance
+from .interpolation import Interpolation, auto_spacing, grid_offset, plan_interpolation
 from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
 from .pacing import MAX_PACED_ERROR, GatherPace, Schedule
 from .stochastic_lightcuts import leaf_cdf, stochastic_lightcut
@@ -103,15 +104,44 @@ class Gather:
         gather_batch: largest batch of shading points the memory plan allows.
     """
 
-    def __init__(self, scene: BuiltScene, settings: RenderSettings, g: GBuffer, gather_batch: int):
+    def __init__(self, scene: BuiltScene, settings: RenderSettings, g: GBuffer, gather_batch: int,
+                 iteration: int = 0):
         self.scene, self.settings, self.g = scene, settings, g
         self.gather_batch = gather_batch
+        self.iteration = iteration
+        self.interp: Interpolation | None = None
+
+    def _plan_interpolation(self, stats: dict) -> NDArray:
+        """Plan the gather's interpolation (:mod:`.interpolation`); (Q,) bool the points
+        to gather."""
+        s, window = self.settings, self.scene.camera.window
+        k = s.gather_spacing or auto_spacing(window.n_pixels)
+        if k > 1 and s.gather != "BRUTE_FORCE":
+            self.interp = plan_interpolation(self.g, self.scene, window.width, window.height, k,
+                                             grid_offset(k, self.iteration))
+        stats["gather_spacing"] = k if self.interp is not None else 1
+        n_valid = max(int(np.count_nonzero(self.g.valid)), 1)
+        stats["gather_interpolated"] = 0.0 if self.interp is None else len(self.interp.target) / n_valid
+        return self.g.valid if self.interp is None else self.interp.gathered(self.g.valid)
+
+    def _filled(self, L: NDArray, done_pt: NDArray, copy: bool = False) -> tuple[NDArray, NDArray]:
+        """``L`` (2, Q, 3) and ``done_pt`` (Q,) with the interpolated points set (in place
+        unless ``copy``)."""
+        if self.interp is None:
+            return L, done_pt
+        if copy:
+            L, done_pt = L.copy(), done_pt.copy()
+        done_pt[self.interp.target] = self.interp.fill(L, done_pt)
+        return L, done_pt
 
     def run(self, vpls, tree, gmax: float, schedule: Schedule, stats: dict, show,
             rival: DirectRival | None = None) -> Gathered:
-        """VPL light at every shading point; ``show(point_parts, done)`` after every batch
-        (preview; ``done`` (Q,) the points gathered, for the caller to reduce to pixels only
-        when a preview is due: per batch, that reduction alone cost ≈ 4 s per 1080p pass).
+        """VPL light at every shading point; ``show(points)`` after every batch (preview;
+        ``points()`` returns the light parts (2, Q, 3) and (Q,) the points done so far, for
+        the caller to call — and reduce to pixels — only when a preview is due: per batch,
+        that reduction alone cost ≈ 4 s per 1080p pass). Points the gather interpolates
+        (:mod:`.interpolation`, ``gather_spacing``) are filled from their anchors after
+        every whole pass.
         ``rival``: the direct-light passes, which may take spare time instead of further
         gather passes (:mod:`.balance`).
 
@@ -124,8 +154,12 @@ class Gather:
         budget the bounded gather would spend on refinement goes into averaging instead.
         """
         s, g, window = self.settings, self.g, self.scene.camera.window
-        Q, S = len(g.pixel), g.samples
-        pts_all = spread_order(np.flatnonzero(g.valid), s.seed)
+        S = g.samples
+        pts_all = spread_order(np.flatnonzero(self._plan_interpolation(stats)), s.seed)
+        preview = show
+
+        def show(point_parts, done):     # the interpolated points filled only for a preview
+            preview(lambda: self._filled(point_parts, done, copy=True))
         clock = schedule.clock
         if not warm_up.wait(lambda: clock.poll(schedule.fraction("Lightcuts", 0.0),
                                                "Lightcuts: compiling the kernels (first render only)")):
@@ -135,6 +169,7 @@ class Gather:
         sweep = _Sweep(self, vpls, tree, gmax, schedule, stats, pts_all)
         t0 = time.perf_counter()
         L, cut, done_pt, done = sweep.run(0, show)
+        self._filled(L, done_pt)
         if len(vpls) == 0 and not clock.cancelled:
             done_pt[:] = True       # no VPL light anywhere: every point is complete (with 0)
         passes = 1.0
@@ -142,6 +177,8 @@ class Gather:
             L, passes = self._more_passes(sweep, L, time.perf_counter() - t0, schedule, show, done_pt, rival)
         stats["gather_passes"] = passes
         sweep.record(stats, done, cut)
+        if self.interp is not None:
+            self.interp.fill_values(cut)
         glossy = self._glossy(done_pt & g.valid)
         through = 0.0
         if g.through is not None:
@@ -180,8 +217,11 @@ class Gather:
                         break
                     continue
             t0 = time.perf_counter()
-            L2, _, _, done2 = sweep.run(int(passes), lambda parts, c: None)
+            L2, _, done_pt2, done2 = sweep.run(int(passes), lambda parts, c: None)
             pts = sweep.pts_all[:done2]
+            if done2 == n_pts and self.interp is not None:      # a whole pass: fill it too
+                self._filled(L2, done_pt2)
+                pts = np.r_[pts, self.interp.target]
             total[:, pts] += L2[:, pts]
             count[pts] += 1
             passes += done2 / n_pts

@@ -483,15 +483,16 @@ class ErcutsIntegrator:
         window = self.scene.camera.window
         rough = self.rough
 
-        def show(point_parts, done):
+        def show(points):
             def image():
+                point_parts, done = points()
                 complete = done.reshape(-1, g.samples).all(axis=1)
                 parts = self._compose(base, per_pixel_parts(point_parts, g.samples), None, 1.0)
                 fallback = rough.full_film().light_parts()
                 return _rgba(window, np.where(complete[None, :, None], parts, fallback), alpha)
             self.clock.show(image)
 
-        gather = Gather(self.scene, self.settings, g, self.memory.gather_batch)
+        gather = Gather(self.scene, self.settings, g, self.memory.gather_batch, self.iteration)
         return gather.run(vpls, tree, gmax, self.schedule, self.stats, show, rival=self.direct_rival)
 
     # ------------------------------------------------------------------ non-VPL light

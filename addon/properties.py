@@ -191,6 +191,12 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         description="Mutation steps per chain; every step deposits a share of the chain's energy",
         default=_default("chain_length", 100), min=1, soft_max=10000,
     )
+    min_chain_length: IntProperty(
+        name="Min Chain Length",
+        description=("Beyond Max Chains (large renders) the same mutation steps are spread over "
+                     "more, shorter chains, down to this length"),
+        default=_default("min_chain_length", 20), min=1, soft_max=10000,
+    )
     lens_perturbation: BoolProperty(
         name="Lens Perturbation",
         description="Use Veach's lens perturbation (moves the image point of a path)",

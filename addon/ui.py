@@ -141,6 +141,7 @@ class ERCUTS_RENDER_PT_ercuts(ErcutsPanel, bpy.types.Panel):
         col.prop(settings, "chains_per_pixel")
         col.prop(settings, "max_chains")
         col.prop(settings, "chain_length")
+        col.prop(settings, "min_chain_length")
         layout.prop(settings, "iterations")
         layout.prop(settings, "clamp")
 

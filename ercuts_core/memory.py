@@ -47,6 +47,10 @@ GBUFFER_POINT_BYTES = 300
 #: (:func:`~ercuts_core.integrators.ercuts.vpl.follow_specular`) and the first-hit AOVs taken
 #: before (depth, normal, albedo: float64).
 GBUFFER_FOLLOW_BYTES = 3 * 8 + 1 + 7 * 8
+#: … plus, per shading point, the gather's interpolation (:mod:`~ercuts_core.integrators.
+#: ercuts.interpolation`): four anchors and weights, the reflectance, and the fill's
+#: temporaries (the anchors' light parts, their ratio-weighted sum).
+GBUFFER_INTERP_BYTES = 4 * 8 + 4 * 4 + 3 * 4 + 4 * 2 * 3 * 8
 #: ERCUTS per pixel: the spread of the direct-light and gather passes (two running sums
 #: each, :mod:`~ercuts_core.integrators.ercuts.balance`) and a pass's luminance.
 BALANCE_PIXEL_BYTES = 5 * 8
@@ -145,7 +149,8 @@ def fixed_parts(n_pixels: int, n_triangles: int, settings: RenderSettings) -> di
         "films": n_pixels * channels * (8 * films + OUTPUT_BYTES_PER_CHANNEL),
     }
     if ercuts:
-        parts["G-buffer"] = (n_pixels * s.shading_samples * (GBUFFER_POINT_BYTES + GBUFFER_FOLLOW_BYTES)
+        parts["G-buffer"] = (n_pixels * s.shading_samples * (GBUFFER_POINT_BYTES + GBUFFER_FOLLOW_BYTES
+                                                         + GBUFFER_INTERP_BYTES)
                              + n_pixels * BALANCE_PIXEL_BYTES)
         chains = _chains(n_pixels, s)
         parts["VPLs"] = int(chains * (VPL_SLOTS_PER_CHAIN * VPL_SLOT_BYTES + VPLS_PER_CHAIN * VPL_BYTES))
@@ -153,9 +158,10 @@ def fixed_parts(n_pixels: int, n_triangles: int, settings: RenderSettings) -> di
 
 
 def _chains(n_pixels: int, s: RenderSettings) -> int:
-    """Expected chains Σ⌊U + e/(N·e_d)⌋ ≈ min(c·n, max_chains)·(seed energy / P) (measured
-    0.95–1.03), with a margin of 1.25: bounded by ``max_chains`` at any resolution."""
-    return int(1.25 * min(s.chains_per_pixel * n_pixels, s.max_chains))
+    """Expected chains Σ⌊U + e/(N·e_d)⌋ ≈ C·(seed energy / P) (measured 0.95–1.03; C of
+    :meth:`~ercuts_core.settings.RenderSettings.chain_plan`), with a margin of 1.25: bounded
+    by max_chains · chain_length / min_chain_length at any resolution."""
+    return int(1.25 * s.chain_plan(n_pixels)[0])
 
 
 def phase_parts(n_pixels: int, settings: RenderSettings, batch: int, seeds: int, e1: int,

@@ -81,10 +81,16 @@ class RenderSettings:
             ``iteration_start`` … ``iteration_start + iterations − 1``), so that a frame's
             iterations can be split over several renders and averaged.
         chains_per_pixel: average number of ER chains started per pixel (c).
-        max_chains: ER chains per iteration at most (the default leaves renders up to
-            256×256 at c = 0.25 unchanged); beyond it the chains, VPLs and their memory
-            follow this budget instead of the pixel count, and iterations add more (issue 17).
+        max_chains: ER chains of ``chain_length`` steps per iteration at most (the default
+            leaves renders up to 256×256 at c = 0.25 unchanged); beyond it the chains' mutation
+            steps, VPLs and memory follow the budget max_chains × chain_length instead of the
+            pixel count (issue 17): the chains get shorter, down to ``min_chain_length``, and
+            more numerous (:meth:`chain_plan`), and iterations add more.
         chain_length: mutation steps per chain (N); every step deposits P/n.
+        min_chain_length: the shortest chains the step budget of ``max_chains`` is spread
+            over (shorter, more independent chains: a VPL set with less correlated error;
+            at 1280×720 on the door scene in one 300 s iteration, relMSE 0.0048 with 16 k
+            chains of 100 steps, 0.0029 with 49 k of 33, 0.0026 with 82 k of 20).
         lens_perturbation, caustic_perturbation, multichain_perturbation (inactive: it needs
         perfectly specular lobes, which the core does not have yet; hidden in the UI),
         bidirectional_mutation: Veach's mutations used by the chains.
@@ -169,6 +175,7 @@ class RenderSettings:
     chains_per_pixel: float = 0.25
     max_chains: int = 16384
     chain_length: int = 100
+    min_chain_length: int = 20
     lens_perturbation: bool = True
     caustic_perturbation: bool = True
     multichain_perturbation: bool = True
@@ -218,8 +225,8 @@ class RenderSettings:
             raise ValueError(f"iteration_start must be >= 0, got {self.iteration_start}")
         if self.iterations < 0:
             raise ValueError(f"iterations must be >= 0 (0 = until the time limit), got {self.iterations}")
-        if self.chains_per_pixel <= 0 or self.chain_length < 1 or self.max_chains < 1:
-            raise ValueError("chains_per_pixel and max_chains must be > 0 and chain_length >= 1")
+        if self.chains_per_pixel <= 0 or self.chain_length < 1 or self.max_chains < 1 or self.min_chain_length < 1:
+            raise ValueError("chains_per_pixel and max_chains must be > 0, chain_length and min_chain_length >= 1")
         if min(self.max_cut_size, self.stochastic_cut_size, self.stochastic_passes, self.stochastic_cut_sharing,
                self.shading_samples, self.e1_samples, self.direct_samples) < 1:
             raise ValueError("max_cut_size, stochastic_cut_size, stochastic_passes, stochastic_cut_sharing, "
@@ -251,6 +258,19 @@ class RenderSettings:
         """ERCUTS chains and VPLs also carry direct light (``direct_light='VPL'``, the paper);
         the target class of :func:`~ercuts_core.integrators.ercuts.paths.is_target`."""
         return self.direct_light == "VPL"
+
+    def chain_plan(self, n_pixels: int) -> tuple[float, int]:
+        """(C, N): the ER chains per iteration and their length for ``n_pixels`` pixels.
+        C = c·n chains of ``chain_length`` steps up to ``max_chains``; beyond, the same
+        mutation steps B = max_chains · chain_length spread over shorter chains,
+        N = clip(B / (c·n), min_chain_length, chain_length), C = min(c·n, B / N)."""
+        wanted = self.chains_per_pixel * n_pixels
+        if wanted <= self.max_chains:
+            return wanted, self.chain_length
+        steps = self.max_chains * self.chain_length
+        length = int(min(self.chain_length, max(min(self.min_chain_length, self.chain_length),
+                                                round(steps / wanted))))
+        return min(wanted, steps / length), length
 
     def replace(self, **changes) -> "RenderSettings":
         return dataclasses.replace(self, **changes)

@@ -392,9 +392,10 @@ class ErcutsIntegrator:
 
     def _chain_seeds(self, P: float, rng) -> tuple[PathBatch, NDArray]:
         """Seed paths (fresh paths, one sample per seed pixel) and their chain counts for
-        chains whose states are worth e_d = P/n, n = C · chain_length with
-        C = min(chains_per_pixel · pixels, max_chains) chains per iteration: the chains, and so
-        the VPLs, follow a budget, not the pixel count (issue 17). When the cap binds, seeds
+        chains whose states are worth e_d = P/n, n = C · N with C chains of N steps per
+        iteration (:meth:`~ercuts_core.settings.RenderSettings.chain_plan`: up to max_chains
+        chains of chain_length, beyond that shorter ones): the chains, and so the VPLs,
+        follow a budget, not the pixel count (issue 17). When the cap binds, seeds
         come from a random fraction q = C / (chains_per_pixel · pixels) of the pixels, their
         energies divided by q (an unbiased estimate of the image energy: every pixel is in
         the subset with probability q). Traced in batches of ``memory.seed_pixels`` pixels
@@ -403,8 +404,9 @@ class ErcutsIntegrator:
         that of one batch."""
         s, n = self.settings, self.scene.camera.window.n_pixels
         wanted = s.chains_per_pixel * n
-        n_chains = min(wanted, s.max_chains)
-        e_d = P / (n_chains * s.chain_length) if n_chains > 0 else 0.0
+        n_chains, self.chain_length = s.chain_plan(n)
+        self.stats["chain_length"] = self.chain_length
+        e_d = P / (n_chains * self.chain_length) if n_chains > 0 else 0.0
         pix, q = np.arange(n), 1.0
         if n_chains < wanted:
             q = n_chains / wanted
@@ -415,7 +417,7 @@ class ErcutsIntegrator:
         kept, counts, total = [], [], 0
         for start in range(0, len(pix), step):
             seeds, energy = self._seeds(rng, pix[start:start + step])
-            starts = chain_starts(energy / q, s.chain_length, e_d, rng)
+            starts = chain_starts(energy / q, self.chain_length, e_d, rng)
             kept.append(seeds.take(np.flatnonzero(starts > 0)))
             counts.append(starts[starts > 0])
             total += len(seeds)
@@ -428,15 +430,16 @@ class ErcutsIntegrator:
 
     # ------------------------------------------------------------------ phase 2
     def _run_chains(self, seeds: PathBatch, starts: NDArray, rng):
-        """``starts[i]`` chains of ``chain_length`` steps from each seed (paper §3.2)."""
+        """``starts[i]`` chains of ``self.chain_length`` steps (:meth:`~ercuts_core.settings.
+        RenderSettings.chain_plan`) from each seed (paper §3.2)."""
         s, clock, sched = self.settings, self.clock, self.schedule
         ctx = MutationContext(self.scene, s.max_depth + 1, direct=s.direct_vpls,
                               clear_x1=not self._follows_specular())
         enabled = (s.lens_perturbation, s.caustic_perturbation, s.multichain_perturbation,
                    s.bidirectional_mutation)
         deadline = sched.deadline("chains")
-        label = f"| {int(starts.sum())} chains x {s.chain_length} steps"
-        return run_chains(ctx, seeds, starts, s.chain_length, enabled, rng,
+        label = f"| {int(starts.sum())} chains x {self.chain_length} steps"
+        return run_chains(ctx, seeds, starts, self.chain_length, enabled, rng,
                           lambda f: sched.alive(deadline, "ER chains", 0.1 + 0.9 * f, label),
                           interrupt=lambda f: clock.poll(sched.fraction("ER chains", 0.1 + 0.9 * f),
                                                          f"ER chains {100 * f:.0f}% {label}"))

@@ -108,14 +108,18 @@ class Interpolation:
 
 
 def plan_interpolation(g: GBuffer, scene, width: int, height: int, k: int,
-                       offset: tuple[int, int]) -> Interpolation | None:
+                       offset: tuple[int, int], keep_going=None) -> Interpolation | None:
     """The interpolated points of ``g`` (a window of ``width`` × ``height`` pixels, S points
     per pixel, entry q = pixel·S + s) on the anchor grid of spacing ``k`` shifted by
-    ``offset``; None for k ≤ 1 or when no point qualifies (module docstring)."""
+    ``offset``; None for k ≤ 1, when no point qualifies or when ``keep_going()`` (called
+    after every chunk of work, for progress and Esc) returns False (module docstring)."""
     if k <= 1:
         return None
     S = g.samples
-    ok, rho = _smooth_points(g, scene)
+    smooth = _smooth_points(g, scene, keep_going)
+    if smooth is None:
+        return None
+    ok, rho = smooth
     q = np.arange(len(g.pixel))
     pix = q // S
     x, y = pix % width, pix // width
@@ -136,6 +140,8 @@ def plan_interpolation(g: GBuffer, scene, width: int, height: int, k: int,
         use = inside & ok[a] & _alike(g, rho, cand, a)
         anchor[:, c] = np.where(use, a, cand)
         weight[:, c] = np.where(use, w, 0.0)
+        if keep_going is not None and not keep_going():
+            return None
     total = weight.sum(axis=1)
     keep = total >= MIN_WEIGHT
     if not keep.any():
@@ -144,10 +150,10 @@ def plan_interpolation(g: GBuffer, scene, width: int, height: int, k: int,
                          weight=(weight[keep] / total[keep, None]).astype(np.float32), rho=rho)
 
 
-def _smooth_points(g: GBuffer, scene) -> tuple[NDArray, NDArray]:
+def _smooth_points(g: GBuffer, scene, keep_going=None) -> tuple[NDArray, NDArray] | None:
     """(Q,) bool points whose VPL light may be interpolated (valid, first hits, a
     reflection-only BSDF with no delta lobe and no specular lobe sharper than :data:`ROUGH`)
-    and their (Q, 3) float32 reflectance ρ (:meth:`Bsdf.albedo`)."""
+    and their (Q, 3) float32 reflectance ρ (:meth:`Bsdf.albedo`); None when stopped."""
     ok = g.valid.copy()
     if g.through is not None:
         ok &= ~g.through
@@ -161,6 +167,8 @@ def _smooth_points(g: GBuffer, scene) -> tuple[NDArray, NDArray]:
             smooth &= bsdf.is_diffuse | (scene.roughness(g.mat[h], g.p[h]) >= ROUGH)
         ok[h] = smooth
         rho[h] = bsdf.albedo()
+        if keep_going is not None and not keep_going():
+            return None
     return ok, rho
 
 

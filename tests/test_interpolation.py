@@ -184,3 +184,15 @@ def test_interpolated_gather_in_a_render_agrees_with_the_full_gather() -> None:
     assert np.abs(d.mean()) <= 4.5 * d.std(ddof=1) / np.sqrt(d.size) + 0.01 * out[1][0].mean()
     assert np.all(np.isfinite(out[2][0]))
     assert ((out[2][0] > 0) == (out[1][0] > 0)).mean() > 0.99      # no hole, no light outside
+
+
+def test_planning_polls_and_stops_when_asked() -> None:
+    """``keep_going`` is called during the planning (progress, Esc); False stops it (None:
+    the caller gathers every point, or nothing once cancelled)."""
+    w, h = 9, 7
+    calls = []
+    it = plan_interpolation(plane_gbuffer(w, h), PlaneScene(), w, h, 2, (0, 0),
+                            keep_going=lambda: calls.append(1) or True)
+    assert it is not None and len(calls) >= 5           # a chunk, then the four corners
+    assert plan_interpolation(plane_gbuffer(w, h), PlaneScene(), w, h, 2, (0, 0),
+                              keep_going=lambda: False) is None

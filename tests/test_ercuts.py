@@ -242,6 +242,24 @@ def test_beyond_max_chains_the_steps_spread_over_shorter_chains():
     assert abs(e_spread / e_full - 1) < 0.03, (e_spread, e_full)
 
 
+def test_a_paced_iteration_stops_seeding_at_its_deadline(monkeypatch):
+    """Under a time limit the seed paths stop at their deadline (here at once: SEED_SHARE =
+    0, so after the first of three 1024-pixel batches, drawn in a random order); the chains
+    from that random third of the pixels still carry the image's energy (within 3 % of the
+    render that seeds every pixel, as in the tests above)."""
+    from ercuts_core.integrators.ercuts import integrator as ercuts_integrator
+
+    room = closed_room(64, 48)
+    fast = dict(FAST, seed=4, batch_rays=1 << 15, time_limit=12.0, iterations=1)
+    full = render(room, RenderSettings(**fast))
+    assert full.stats["seed_pixels"] == 64 * 48 and "seed_pixels_planned" not in full.stats
+    monkeypatch.setattr(ercuts_integrator, "SEED_SHARE", 0.0)
+    cut = render(room, RenderSettings(**fast))
+    assert cut.stats["seed_pixels"] == 1024 and cut.stats["seed_pixels_planned"] == 64 * 48
+    e_full, e_cut = (luminance(r.image[..., :3]).mean() for r in (full, cut))
+    assert abs(e_cut / e_full - 1) < 0.03, (e_cut, e_full)
+
+
 def test_the_default_chain_plan_by_resolution():
     """Defaults: up to 256×256 every pixel's c = 0.25 chains of 100 steps (160×120 unchanged);
     at 640×480 (76 800 chains of 21 steps) and beyond 1.64 M steps in chains of 20 (81 920

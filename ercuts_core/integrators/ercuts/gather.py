@@ -158,10 +158,9 @@ class Gather:
         s, g, window = self.settings, self.g, self.scene.camera.window
         S = g.samples
         pts_all = spread_order(np.flatnonzero(self._plan_interpolation(stats, schedule)), s.seed)
-        preview = show
 
-        def show(point_parts, done):     # the interpolated points filled only for a preview
-            preview(lambda: self._filled(point_parts, done, copy=True))
+        def preview(point_parts, done):     # the interpolated points filled only when shown
+            show(lambda: self._filled(point_parts, done, copy=True))
         clock = schedule.clock
         if not warm_up.wait(lambda: clock.poll(schedule.fraction("Lightcuts", 0.0),
                                                "Lightcuts: compiling the kernels (first render only)")):
@@ -170,13 +169,14 @@ class Gather:
             pts_all = pts_all[:0]
         sweep = _Sweep(self, vpls, tree, gmax, schedule, stats, pts_all)
         t0 = time.perf_counter()
-        L, cut, done_pt, done = sweep.run(0, show)
+        L, cut, done_pt, done = sweep.run(0, preview)
         self._filled(L, done_pt)
         if len(vpls) == 0 and not clock.cancelled:
             done_pt[:] = True       # no VPL light anywhere: every point is complete (with 0)
         passes = 1.0
         if s.gather == "STOCHASTIC" and done == len(pts_all) and len(pts_all):
-            L, passes = self._more_passes(sweep, L, time.perf_counter() - t0, schedule, show, done_pt, rival)
+            L, passes = self._more_passes(sweep, L, time.perf_counter() - t0, schedule, preview, done_pt,
+                                          rival)
         stats["gather_passes"] = passes
         sweep.record(stats, done, cut)
         if self.interp is not None:

@@ -95,7 +95,7 @@ def _gather_and_rival(sigma_gather: float, sigma_direct: float, fills: bool, pas
     schedule = SimpleNamespace(fills_time=lambda: fills, remaining=lambda: state["left"],
                                clock=SimpleNamespace(cancelled=False))
     gather = SimpleNamespace(settings=SimpleNamespace(stochastic_passes=passes_asked),
-                             g=SimpleNamespace(pixel=np.arange(Q), samples=1))
+                             g=SimpleNamespace(pixel=np.arange(Q), samples=1), interp=None)
     gather._probe = lambda sw, L, spread: Gather._probe(gather, sw, L, spread)
     L0 = draw()
     _, passes = Gather._more_passes(gather, sweep, L0, 1.0, schedule, lambda *a: None,

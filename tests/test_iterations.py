@@ -177,7 +177,7 @@ def test_gather_passes_fill_time_no_later_iteration_would_use():
     schedule = SimpleNamespace(fills_time=fills_time, remaining=lambda: state["left"],
                                clock=SimpleNamespace(cancelled=False))
     gather = SimpleNamespace(settings=SimpleNamespace(stochastic_passes=passes_asked),
-                             g=SimpleNamespace(pixel=np.zeros(Q), samples=1))
+                             g=SimpleNamespace(pixel=np.zeros(Q), samples=1), interp=None)
     L0 = np.ones((2, Q, 3))
     mean, passes = Gather._more_passes(gather, sweep, L0, 1.0, schedule, lambda *a: None, np.ones(Q, bool))
     assert passes > passes_asked                         # the time was filled

@@ -268,8 +268,7 @@ class RenderSettings:
         if wanted <= self.max_chains:
             return wanted, self.chain_length
         steps = self.max_chains * self.chain_length
-        length = int(min(self.chain_length, max(min(self.min_chain_length, self.chain_length),
-                                                round(steps / wanted))))
+        length = int(min(self.chain_length, max(self.min_chain_length, round(steps / wanted))))
         return min(wanted, steps / length), length
 
     def replace(self, **changes) -> "RenderSettings":

@@ -19,7 +19,7 @@ from ...sampling import luminance
 from ...scene import BuiltScene
 from ...settings import RenderSettings
 from .balance import DirectRival, PassVariance
-from .interpolation import Interpolation, auto_spacing, grid_offset, plan_interpolation
+from .interpolation import Interpolation, auto_spacing, grid_offset, plan_interpolation, same_surface
 from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
 from .pacing import MAX_PACED_ERROR, GatherPace, Schedule
 from .stochastic_lightcuts import leaf_cdf, stochastic_lightcut
@@ -52,12 +52,6 @@ PASS_START = 0.1
 RIVAL_START = 1.5
 #: Consecutive shading points kept together in the shuffled gather order (coherent rays).
 GATHER_RUN = 32
-#: Cut sharing (``stochastic_cut_sharing``): a point shares its block's cut when its shading
-#: normal is within this cosine of the block head's, it lies within SHARE_PLANE·distance of
-#: the head's tangent plane, in the same pixel row, with the same material (else: an edge,
-#: its own cut).
-SHARE_COS = 0.95
-SHARE_PLANE = 0.05
 #: Glossy shading points get the per-cluster GGX material bound (:class:`.lightcuts.
 #: GlossyReceivers`); False falls back to the constant lobe-peak bound of ``bsdf_max_value``,
 #: which glossy lobes exceed (kept for benchmarks/bench_glossy_bound.py's comparison only).
@@ -439,17 +433,12 @@ def spread_order(points: NDArray, seed: int) -> NDArray:
 def share_refs(g: GBuffer, idx: NDArray, block: int, width: int) -> NDArray:
     """(P,) for the batch's points ``idx`` (G-buffer entries in gather order), the local index
     of the point whose stochastic cut each uses: the head of its block of ``block``
-    consecutive points when both are alike (:data:`SHARE_COS`, :data:`SHARE_PLANE`, same
-    row and material), else itself.  Which cut a point uses changes only its noise: the
+    consecutive points when both lie on one surface (:func:`.interpolation.same_surface`) in
+    one row, else itself.  Which cut a point uses changes only its noise: the
     shared cut keeps its empty clusters (:func:`.stochastic_lightcuts.shared_cut`)."""
     j = np.arange(len(idx))
     head = j - j % block
-    p, n = g.p[idx], g.ns[idx]
-    d = p - p[head]
-    dist = np.sqrt(np.einsum("ij,ij->i", d, d))
-    alike = ((g.mat[idx] == g.mat[idx[head]]) & (g.pixel[idx] // width == g.pixel[idx[head]] // width)
-             & (np.einsum("ij,ij->i", n, n[head]) >= SHARE_COS)
-             & (np.abs(np.einsum("ij,ij->i", d, n[head])) <= SHARE_PLANE * dist))
+    alike = (g.pixel[idx] // width == g.pixel[idx[head]] // width) & same_surface(g, idx[head], idx)
     return np.where(alike, head, j)
 
 

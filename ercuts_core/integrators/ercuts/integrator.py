@@ -424,8 +424,9 @@ class ErcutsIntegrator:
             batches = np.random.default_rng([s.seed, SEED_ORDER_SALT]).permutation(batches)
         kept, counts, total, traced = [], [], 0, 0
         for i, start in enumerate(batches):
-            traced += len(pix[start:start + step])
-            seeds, energy = self._seeds(rng, pix[start:start + step])
+            batch = pix[start:start + step]
+            traced += len(batch)
+            seeds, energy = self._seeds(rng, batch)
             starts = chain_starts(energy / q, self.chain_length, e_d, rng)
             kept.append(seeds.take(np.flatnonzero(starts > 0)))
             counts.append(starts[starts > 0])

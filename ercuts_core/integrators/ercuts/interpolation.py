@@ -34,9 +34,10 @@ from .vpl import GBuffer
 #: ``gather_spacing`` = 0: the spacing k for renders of at least this many pixels (largest
 #: first); below the smallest, every point is gathered (k = 1).
 AUTO_SPACING = ((800_000, 2),)
-#: Anchors must share the material and have a shading normal within this cosine …
+#: Two points lie on one smooth surface (:func:`same_surface`; also the gather's cut
+#: sharing) when they share the material, their shading normals are within this cosine …
 SIMILAR_COS = 0.95
-#: … and lie within this fraction of their distance from the point's tangent plane.
+#: … and the second lies within this fraction of their distance from the first's tangent plane.
 SIMILAR_PLANE = 0.05
 #: Points whose specular lobe is rougher than this (or that have none) may be interpolated.
 ROUGH = 0.5
@@ -172,13 +173,19 @@ def _smooth_points(g: GBuffer, scene, keep_going=None) -> tuple[NDArray, NDArray
     return ok, rho
 
 
-def _alike(g: GBuffer, rho: NDArray, t: NDArray, a: NDArray) -> NDArray:
-    """(N,) bool: anchor entries ``a`` may light targets ``t`` (same material, normals within
-    :data:`SIMILAR_COS`, within :data:`SIMILAR_PLANE` of the target's tangent plane, no
-    channel black at the anchor that is not black at the target)."""
-    n_t, n_a = g.ns[t], g.ns[a]
-    d = g.p[a] - g.p[t]
+def same_surface(g: GBuffer, i: NDArray, j: NDArray) -> NDArray:
+    """(N,) bool: G-buffer entries ``j`` lie on the smooth surface of entries ``i``: the same
+    material, shading normals within :data:`SIMILAR_COS`, and within :data:`SIMILAR_PLANE`
+    of their distance from i's tangent plane (not across a silhouette, crease or step)."""
+    n_i = g.ns[i]
+    d = g.p[j] - g.p[i]
     dist = np.sqrt(np.einsum("ij,ij->i", d, d))
+    return ((g.mat[i] == g.mat[j]) & (np.einsum("ij,ij->i", n_i, g.ns[j]) >= SIMILAR_COS)
+            & (np.abs(np.einsum("ij,ij->i", d, n_i)) <= SIMILAR_PLANE * dist))
+
+
+def _alike(g: GBuffer, rho: NDArray, t: NDArray, a: NDArray) -> NDArray:
+    """(N,) bool: anchor entries ``a`` may light targets ``t`` (:func:`same_surface`, and no
+    channel black at the anchor that is not black at the target)."""
     rho_ok = ((rho[a] >= RHO_MIN) | (rho[t] < RHO_MIN)).all(axis=1)
-    return ((g.mat[t] == g.mat[a]) & (np.einsum("ij,ij->i", n_t, n_a) >= SIMILAR_COS)
-            & (np.abs(np.einsum("ij,ij->i", d, n_t)) <= SIMILAR_PLANE * dist) & rho_ok)
+    return same_surface(g, t, a) & rho_ok

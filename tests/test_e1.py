@@ -134,3 +134,25 @@ def test_few_samples_leave_no_vpl_many_times_too_bright(box, e1_true, monkeypatc
     assert worst() < 6.0
     monkeypatch.setattr(vpl, "SHAKY_RELATIVE_VARIANCE", np.inf)
     assert worst() > 6.0
+
+
+
+def test_clamp_factor():
+    """min(1, g_max·d²/cosθ): 1 far away, the clamp's share close by, and 1 without a clamp
+    even at d = 0 (inf·0 gave NaN, seen as a warning in an unclamped 640×480 render)."""
+    from ercuts_core.integrators.ercuts.vpl import clamp_factor
+
+    d2, cos_v = np.array([4.0, 0.01, 0.0]), np.array([1.0, 1.0, 0.5])
+    np.testing.assert_allclose(clamp_factor(1.0, d2, cos_v), [1.0, 0.01, 0.0])
+    np.testing.assert_array_equal(clamp_factor(np.inf, d2, cos_v), [1.0, 1.0, 1.0])
+
+
+def test_unclamped_e1_is_finite(box):
+    """With the clamp off (clamp = 0: g_max = inf) Ê1 is finite and positive (inf·0 gave NaN
+    in the clamp factor) and at least the clamped estimate on the same samples."""
+    scene, pos, normal, color, gmax = box
+    off = estimate_e1_light_tracing(scene, pos, normal, color, g_clamp(scene, 0.0), 256,
+                                    np.random.default_rng(5))
+    on = estimate_e1_light_tracing(scene, pos, normal, color, gmax, 256, np.random.default_rng(5))
+    assert np.isfinite(off).all() and (off > 0).all()
+    assert (off >= on).all()

@@ -321,6 +321,30 @@ def test_low_resolution_rough_image_measures_the_same_energy(monkeypatch):
     assert abs(a.mean() - b.mean()) < 4 * se + 1e-12, (a, b)
 
 
+def test_p_relative_error_is_the_standard_error_of_the_mean():
+    """s/(√n·mean) over the passes' energies; undefined (inf) from one pass or at P = 0."""
+    from ercuts_core.integrators.ercuts.initialization import p_relative_error
+
+    assert p_relative_error([1.0, 2.0, 3.0]) == pytest.approx(1.0 / np.sqrt(3) / 2.0)
+    assert p_relative_error([5.0, 5.0, 5.0, 5.0]) == 0.0
+    assert p_relative_error([5.0]) == np.inf and p_relative_error([0.0, 0.0]) == np.inf
+
+
+@pytest.mark.parametrize("target, passes", [(1.0, 4), (0.0, 12)])
+def test_rough_bdpt_stops_once_p_is_known(monkeypatch, target, passes):
+    """The rough BDPT stops after ROUGH_MIN_PASSES passes once P's relative standard error
+    is within ROUGH_P_ERROR (a target of 100 %: at once), and runs all ``rough_samples``
+    while it is not (a target of 0); the error is reported."""
+    from ercuts_core.integrators.ercuts import integrator as ercuts_integrator
+
+    monkeypatch.setattr(ercuts_integrator, "ROUGH_P_ERROR", target)
+    cheap = dict(chain_length=1, chains_per_pixel=0.05, direct_samples=1, e1_samples=4,
+                 gather="STOCHASTIC", stochastic_cut_size=4, stochastic_passes=1)
+    r = render(closed_room(32, 24), RenderSettings(rough_samples=12, seed=1, iterations=1, **cheap))
+    assert r.stats["bdpt_samples"] == passes
+    assert 0.0 < r.stats["P_relative_error"] < 0.2
+
+
 def test_stochastic_gather_agrees_with_brute_force():
     """The stochastic gather is unbiased for the VPLs: on the same VPLs (same seed) its
     image energy is the brute-force gather's within 1 % (measured 0.2 %: 768 pixels of

@@ -110,7 +110,7 @@ def progress_batch_pixels(settings: RenderSettings) -> int:
 def run_passes(integrator: "Integrator", film: Film, clock: Clock, *, samples: int, batch: int,
                phase: str, key: tuple = (), fraction: Callable[[float], float] = lambda f: f,
                deadline: float | None = None, show: bool = True, first: int = 0,
-               on_pass: Callable[[Film], None] | None = None) -> Film:
+               on_pass: Callable[[Film], bool | None] | None = None) -> Film:
     """The pass loop: up to ``samples`` passes of ``integrator`` over ``film``'s window.
 
     Each pass renders every pixel once, in batches of ``batch`` pixels with random streams
@@ -125,12 +125,14 @@ def run_passes(integrator: "Integrator", film: Film, clock: Clock, *, samples: i
     120 s render no time).
     ``show``: send the merged image to the preview after each pass. ``first``: index of the
     first pass (its random streams; a later call continues a film's passes with new ones).
-    ``on_pass(part)``: called with every complete pass's own film before it is merged.
+    ``on_pass(part)``: called with every complete pass's own film before it is merged; a true
+    return value ends the loop after that pass (the rough BDPT once P is known well enough).
     Returns ``film``.
     """
     s, window = integrator.settings, film.window
     n = window.n_pixels
     t0 = time.perf_counter()
+    enough = False
     for k in range(samples):
         part = Film(window)
         for start in range(0, n, batch):
@@ -143,11 +145,11 @@ def run_passes(integrator: "Integrator", film: Film, clock: Clock, *, samples: i
                 break
         if not clock.cancelled or film.passes_done == 0:
             if on_pass is not None and not clock.cancelled:
-                on_pass(part)
+                enough = bool(on_pass(part))
             film.merge(part)
             if show:
                 clock.show(film.image)
-        if clock.cancelled or (deadline is not None and time.perf_counter() > deadline):
+        if enough or clock.cancelled or (deadline is not None and time.perf_counter() > deadline):
             break
     return film
 

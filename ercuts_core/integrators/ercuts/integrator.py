@@ -108,7 +108,9 @@ from ..path import PathIntegrator
 from .balance import DirectRival, PassVariance
 from .er_sampling import chain_starts, run_chains
 from .gather import Gather, Gathered, per_pixel, per_pixel_parts
-from .initialization import RoughImage, rough_camera, rough_factor, scene_with_camera, seeds_from_path_tracer
+from .initialization import (ROUGH_MIN_PASSES, ROUGH_P_ERROR, RoughImage, indirect_energy, p_relative_error,
+                             rough_camera, rough_factor, rough_image_energy, scene_with_camera,
+                             seeds_from_path_tracer)
 from .light_tree import build_light_tree
 from .mutations import INACTIVE, NAMES, MutationContext
 from .pacing import Schedule
@@ -295,14 +297,26 @@ class ErcutsIntegrator:
 
     # ------------------------------------------------------------------ phase 1
     def _rough_bdpt(self) -> RoughImage:
-        """``rough_samples`` BDPT passes (fewer if the phase's time share runs out), at 1/k of
-        the resolution when the full one would exceed the sample budget
+        """``rough_samples`` BDPT passes (fewer if the phase's time share runs out, or once P is
+        known to :data:`~.initialization.ROUGH_P_ERROR` after at least ``ROUGH_MIN_PASSES``),
+        at 1/k of the resolution when the full one would exceed the sample budget
         (:func:`~.initialization.rough_factor`)."""
         s, cam = self.settings, self.scene.camera
         k = rough_factor(cam.window.n_pixels, s.rough_samples)
         view = self.scene if k == 1 else scene_with_camera(self.scene, rough_camera(cam.desc, k))
         bdpt = BDPTIntegrator(view, s)
-        film = self._passes(bdpt, "BDPT", (), "bdpt", show=k == 1, samples=s.rough_samples)
+        energies: list[float] = []      # each pass's P (the one the chains use), any units
+
+        def on_pass(part: Film) -> bool:
+            energies.append(rough_image_energy(part.image()) if s.direct_vpls
+                            else indirect_energy(part.light_parts()))
+            err = p_relative_error(energies)
+            if np.isfinite(err):
+                self.stats["P_relative_error"] = err
+            return len(energies) >= ROUGH_MIN_PASSES and err <= ROUGH_P_ERROR
+
+        film = self._passes(bdpt, "BDPT", (), "bdpt", show=k == 1, samples=s.rough_samples,
+                            on_pass=on_pass)
         rough = RoughImage(film, cam.window, (cam.width, cam.height), (view.camera.width, view.camera.height))
         # (the camera-side estimate of the delta paths' indirect energy, full-window units)
         per_pass = rough.pixel_area / max(film.passes_done, 1)

@@ -177,6 +177,14 @@ def g_clamp(scene: BuiltScene, clamp: float) -> float:
     return 1.0 / (clamp * 2.0 * scene.scene_radius) ** 2
 
 
+def clamp_factor(gmax: float, d2: NDArray, cos_v: NDArray) -> NDArray:
+    """(n,) min(1, g_max·d²/cosθ_v): the share of a VPL's geometry term cosθ_v/d² that the
+    clamp g_max keeps; 1 without a clamp (g_max = inf, where inf·0 would give NaN)."""
+    if not np.isfinite(gmax):
+        return np.ones(np.shape(d2))
+    return np.minimum(1.0, gmax * d2 / np.maximum(cos_v, 1e-300))
+
+
 def vpl_radiance(scene: BuiltScene, g: GBuffer, pts: NDArray, pos: NDArray, normal: NDArray,
                  intensity: NDArray, gmax: float) -> tuple[NDArray, NDArray]:
     """Radiance at shading points ``pts`` from VPLs (pos, normal, intensity), one pair per row.
@@ -331,7 +339,7 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
                 cos_cam = np.abs(dot(ng, wcam))
                 d2 = yk.t**2
                 cos_v = local[h[k], 2]
-                clamp = np.minimum(1.0, gmax * d2 / np.maximum(cos_v, 1e-300))
+                clamp = clamp_factor(gmax, d2, cos_v)
                 contrib = np.pi * fr * ratio * cos_cam * con.factor[k] * clamp
                 good = np.flatnonzero(contrib > 0)
                 if len(good):

@@ -60,7 +60,8 @@ class RenderSettings:
         rough_samples: ERCUTS: samples per pixel of each iteration's rough BDPT image
             (step 1), which only measures P, seeds the chains and previews: at most 2^19
             camera samples per iteration in all: beyond, the rough image has a lower
-            resolution (``initialization.rough_factor``).
+            resolution (``initialization.rough_factor``). It stops earlier once P is known
+            to 1 % (relative standard error over at least 4 passes, ``stats['P_relative_error']``).
         seed: random seed; the same seed and settings give the same image.
         max_depth: maximum number of bounces (path segments − 1); 1 = direct light only.
             The default 64 keeps the light of deep interiors (8 lost up to 64 % of it in an

@@ -25,7 +25,8 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path[:0] = [os.path.dirname(HERE), HERE]
 
 import metrics  # noqa: E402
-from bench_resolution import RESULTS, load_runs, reference, reference_size  # noqa: E402
+from bench_resolution import RESULTS, box_filter, load_runs, reference, reference_size  # noqa: E402
+from ercuts_core.sampling import luminance  # noqa: E402
 
 #: Block size of the low-frequency part (4×4 blocks of the 160-wide comparison image).
 BLOCK = 4
@@ -33,8 +34,8 @@ BLOCK = 4
 
 def blur(img: np.ndarray, k: int = BLOCK) -> np.ndarray:
     """(H/k, W/k, 3) means of k×k blocks of an (H, W, 3) image (edges cropped)."""
-    H, W = img.shape[:2]
-    return img[:H // k * k, :W // k * k, :3].reshape(H // k, k, W // k, k, 3).mean(axis=(1, 3))
+    h, w = img.shape[0] // k, img.shape[1] // k
+    return box_filter(img[:h * k, :w * k, :3], w, h)
 
 
 def split(images: list[np.ndarray], ref: np.ndarray, floor: float) -> dict:
@@ -56,8 +57,7 @@ def ratio_map(images: list[np.ndarray], ref: np.ndarray, path: str, title: str) 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    y = np.array([0.2126, 0.7152, 0.0722])
-    r = (np.mean(images, axis=0)[..., :3] @ y) / np.maximum(ref[..., :3] @ y, 1e-9)
+    r = luminance(np.mean(images, axis=0)[..., :3]) / np.maximum(luminance(ref[..., :3]), 1e-9)
     fig, ax = plt.subplots(figsize=(6, 4))
     im = ax.imshow(r, cmap="RdBu_r", vmin=0.7, vmax=1.3)
     fig.colorbar(im, ax=ax)

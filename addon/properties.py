@@ -256,6 +256,12 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
                      "bounding diagonal (0 = off); the removed energy is reported"),
         default=_default("clamp", 0.02), min=0.0, soft_max=0.5, precision=3,
     )
+    clamp_compensation: BoolProperty(
+        name="Clamp Compensation",
+        description=("Add back the light the clamp removes near edges and corners with short "
+                     "extra rays (bias compensation); off darkens corners"),
+        default=_default("clamp_compensation", True),
+    )
     gather: EnumProperty(
         name="Gather",
         description="How shading points collect light from the virtual point lights",

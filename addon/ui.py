@@ -144,6 +144,7 @@ class ERCUTS_RENDER_PT_ercuts(ErcutsPanel, bpy.types.Panel):
         col.prop(settings, "min_chain_length")
         layout.prop(settings, "iterations")
         layout.prop(settings, "clamp")
+        layout.prop(settings, "clamp_compensation")
 
 
 class ERCUTS_RENDER_PT_mutations(ErcutsPanel, bpy.types.Panel):

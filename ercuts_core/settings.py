@@ -98,6 +98,11 @@ class RenderSettings:
         max_cut_size: largest lightcut per shading point.
         clamp: VPL geometry clamp as a minimum distance, a fraction of the scene's bounding
             diagonal (cosθ/d² ≤ 1/(clamp·diagonal)²); 0 = off. The removed energy is reported.
+        clamp_compensation: add back the light the clamp removes by Kollig and Keller's
+            (2004) bias compensation — short BSDF rays from every shading point, the clamped
+            estimate where they land (:mod:`~ercuts_core.integrators.ercuts.bias_compensation`)
+            — and normalise the VPLs by their unclamped image energy; with ``direct_light=
+            'NEE'`` only. Off: edges and corners lose the short-range light (the ablation).
         stochastic_cut_size: nodes per shading point of the 'STOCHASTIC' gather.
         stochastic_passes: passes of the 'STOCHASTIC' gather per iteration (each with new VPL
             draws), averaged: its per-pixel noise falls with them while the VPL set is shared;
@@ -187,6 +192,7 @@ class RenderSettings:
     stochastic_cut_sharing: int = 4
     gather_spacing: int = 0
     clamp: float = 0.02
+    clamp_compensation: bool = True
     gather: str = "STOCHASTIC"
     lightcut_error: str = "TOTAL"
     tree_pairing: str = "PLOC"

@@ -180,31 +180,40 @@ class PathIntegrator(Integrator):
         L[idx[r]] += beta[r] * self.scene.lights.radiance_along(o[r], d[r], t)
 
     def _next_event(self, surf, wo: NDArray, bsdf: Bsdf, rng: np.random.Generator) -> NDArray:
-        """(N, 3) direct light at the surfaces: f·|cos|·Li·V·w / pdf."""
-        lights, tracer = self.scene.lights, self.scene.tracer
-        n = len(wo)
-        ls = lights.illuminate(surf.p, rng.random(n), rng.random((n, 2)))
-        f, pdf_bsdf = bsdf.eval_pdf(wo, ls.wi)
-        cos = np.abs(dot(surf.ns, ls.wi))
-        contrib = f * (cos / np.where(ls.valid, ls.pdf_w, 1.0))[:, None] * ls.Li
+        """(N, 3) direct light at the surfaces (:func:`next_event`, MIS-weighted)."""
+        return next_event(self.scene, surf, wo, bsdf, rng)
+
+
+def next_event(scene, surf, wo: NDArray, bsdf: Bsdf, rng: np.random.Generator, mis: bool = True) -> NDArray:
+    """(N, 3) direct light at the surfaces ``surf`` (p, ns, ng) toward ``wo``: f·|cos|·Li·V·w/pdf,
+    one light sample each. ``w`` is the power heuristic against BSDF sampling for lights a
+    BSDF-sampled ray can hit (emissive triangles, the world) [Veach 1997 §9.2]; with ``mis``
+    False it is 1 — the whole direct light by light sampling, for callers that do not also
+    trace BSDF rays to the lights (the clamp's bias compensation, :mod:`.ercuts.bias_compensation`)."""
+    lights, tracer = scene.lights, scene.tracer
+    n = len(wo)
+    ls = lights.illuminate(surf.p, rng.random(n), rng.random((n, 2)))
+    f, pdf_bsdf = bsdf.eval_pdf(wo, ls.wi)
+    cos = np.abs(dot(surf.ns, ls.wi))
+    contrib = f * (cos / np.where(ls.valid, ls.pdf_w, 1.0))[:, None] * ls.Li
+    if mis:
         kind = lights.kind[ls.light]
         nee_only = (kind == POINT) | (kind == SUN) | (kind == AREA)
-        w = np.where(nee_only, 1.0, power_heuristic(ls.pdf_w, pdf_bsdf))
-        contrib *= w[:, None]
-        test = ls.valid & (contrib.max(axis=1) > 0)
-        out = np.zeros((n, 3))
-        if test.any():
-            t = np.flatnonzero(test)
-            infinite = ~np.isfinite(ls.dist[t])
-            target = np.where(infinite[:, None], surf.p[t] + ls.wi[t] * 4.0 * self.scene.scene_radius, ls.p[t])
-            # Surface emitters (area, tri) need their end offset; points and infinite lights do not.
-            on_surface = ~infinite & (np.abs(ls.n[t]).sum(axis=1) > 0)
-            vis = np.empty(len(t), bool)
-            if on_surface.any():
-                a = np.flatnonzero(on_surface)
-                vis[a] = tracer.visible(surf.p[t[a]], surf.ng[t[a]], target[a], ls.n[t[a]])
-            if (~on_surface).any():
-                b = np.flatnonzero(~on_surface)
-                vis[b] = tracer.visible(surf.p[t[b]], surf.ng[t[b]], target[b], None)
-            out[t[vis]] = contrib[t[vis]]
-        return out
+        contrib *= np.where(nee_only, 1.0, power_heuristic(ls.pdf_w, pdf_bsdf))[:, None]
+    test = ls.valid & (contrib.max(axis=1) > 0)
+    out = np.zeros((n, 3))
+    if test.any():
+        t = np.flatnonzero(test)
+        infinite = ~np.isfinite(ls.dist[t])
+        target = np.where(infinite[:, None], surf.p[t] + ls.wi[t] * 4.0 * scene.scene_radius, ls.p[t])
+        # Surface emitters (area, tri) need their end offset; points and infinite lights do not.
+        on_surface = ~infinite & (np.abs(ls.n[t]).sum(axis=1) > 0)
+        vis = np.empty(len(t), bool)
+        if on_surface.any():
+            a = np.flatnonzero(on_surface)
+            vis[a] = tracer.visible(surf.p[t[a]], surf.ng[t[a]], target[a], ls.n[t[a]])
+        if (~on_surface).any():
+            b = np.flatnonzero(~on_surface)
+            vis[b] = tracer.visible(surf.p[t[b]], surf.ng[t[b]], target[b], None)
+        out[t[vis]] = contrib[t[vis]]
+    return out

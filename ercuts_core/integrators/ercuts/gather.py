@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,7 +19,9 @@ from numpy.typing import NDArray
 from ...sampling import luminance
 from ...scene import BuiltScene
 from ...settings import RenderSettings
+from ..path import next_event
 from .balance import DirectRival, PassVariance
+from .bias_compensation import compensate, compensates
 from .interpolation import Interpolation, auto_spacing, grid_offset, plan_interpolation, same_surface
 from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
 from .pacing import MAX_PACED_ERROR, GatherPace, Schedule
@@ -50,6 +53,10 @@ PASS_START = 0.1
 #: A direct-light pass takes spare time only if the iteration's time left holds this many of
 #: its durations (it is not cut short: a pass of the direct film must be complete).
 RIVAL_START = 1.5
+#: Receivers per chunk of the clamp's bias compensation (:meth:`Gather._compensation`; progress
+#: and Esc between chunks), and the seed salt of its draws.
+COMPENSATION_CHUNK = 1 << 14
+COMPENSATION_SALT = 0xB1A5
 #: Consecutive shading points kept together in the shuffled gather order (coherent rays).
 GATHER_RUN = 32
 #: Glossy shading points get the per-cluster GGX material bound (:class:`.lightcuts.
@@ -162,6 +169,7 @@ class Gather:
         if len(vpls) == 0 or clock.cancelled:
             pts_all = pts_all[:0]
         sweep = _Sweep(self, vpls, tree, gmax, schedule, stats, pts_all)
+        comp = self._compensation(sweep, gmax, schedule, stats) if len(pts_all) else None
         t0 = time.perf_counter()
         L, cut, done_pt, done = sweep.run(0, preview)
         self._filled(L, done_pt)
@@ -172,6 +180,8 @@ class Gather:
             L, passes = self._more_passes(sweep, L, time.perf_counter() - t0, schedule, preview, done_pt,
                                           rival)
         stats["gather_passes"] = passes
+        if comp is not None:
+            L[1] += comp
         sweep.record(stats, done, cut)
         if self.interp is not None:
             self.interp.fill_values(cut)
@@ -183,6 +193,43 @@ class Gather:
                         glossy=per_pixel(L.sum(axis=0) * glossy[:, None], window.n_pixels, S),
                         cut=per_pixel(cut[:, None], window.n_pixels, S),
                         complete=done_pt.reshape(-1, S).all(axis=1), through_energy=through)
+
+    def _compensation(self, sweep: "_Sweep", gmax: float, schedule: Schedule, stats: dict) -> NDArray | None:
+        """(Q, 3) the clamp's bias compensation at every valid shading point
+        (:mod:`.bias_compensation`), or None when the render does not compensate
+        (:func:`~.bias_compensation.compensates`). L_o at the surfaces found is the direct
+        light by light sampling plus this gather's clamped VPL estimate there. Runs before
+        the sweep so that the sweep's pacing sees the time it took; a cancel stops it between
+        chunks (the gather then stops too)."""
+        s, g, scene = self.settings, self.g, self.scene
+        if not compensates(s, gmax) or len(sweep.vpls) == 0:
+            return None
+        pts = np.flatnonzero(g.valid)
+        out = np.zeros((len(g.pixel), 3))
+        near, t0 = 0, time.perf_counter()
+        for start in range(0, len(pts), COMPENSATION_CHUNK):
+            idx = pts[start:start + COMPENSATION_CHUNK]
+            rng = np.random.default_rng([s.seed, COMPENSATION_SALT, self.iteration, start])
+
+            def radiance_at(p, ng, ns, wo, mat):
+                bsdf = scene.bsdf(mat, ns, ng, p)
+                L = sweep.radiance(self.shading_points_at(p, ng, ns, wo, mat, bsdf), rng)
+                if not scene.lights.empty:
+                    L = L + next_event(scene, SimpleNamespace(p=p, ns=ns, ng=ng), wo, bsdf, rng, mis=False)
+                return L
+
+            got, hit = compensate(scene, gmax, g.p[idx], g.ng[idx], g.ns[idx], g.wo[idx], g.mat[idx], rng,
+                                  radiance_at)
+            out[idx] = got if g.weight is None else got * g.weight[idx]
+            near += int(np.count_nonzero(hit))
+            f = (start + len(idx)) / len(pts)
+            if not schedule.clock.poll(schedule.fraction("Lightcuts", 0.0),
+                                       f"Lightcuts: clamp compensation {100 * f:.0f}%"):
+                break
+        stats["compensated_points"] = near / max(len(pts), 1)
+        stats["compensated_energy"] = float(luminance(out.sum(axis=0))) / g.samples
+        stats["compensation_seconds"] = time.perf_counter() - t0
+        return out
 
     def _more_passes(self, sweep: "_Sweep", L: NDArray, t_pass: float, schedule: Schedule, show,
                      done_pt: NDArray, rival: DirectRival | None = None) -> tuple[NDArray, float]:
@@ -259,14 +306,20 @@ class Gather:
         return out
 
     def _shading_points(self, idx: NDArray) -> ShadingPoints:
-        """The lightcut shading points of G-buffer entries ``idx`` (BSDF and visibility
-        callbacks; the materials' bound ``bsdf_max_value``, used at diffuse points, computed
-        per batch so that no whole-image pass delays the first progress report; glossy
-        points get :class:`.lightcuts.GlossyReceivers`)."""
-        scene, g = self.scene, self.g
-        bsdf = scene.bsdf(g.mat[idx], g.ns[idx], g.ng[idx], g.p[idx])
-        wo, ng = g.wo[idx], g.ng[idx]
-        p = g.p[idx]
+        """The lightcut shading points of G-buffer entries ``idx`` (:meth:`shading_points_at`;
+        the materials' bound ``bsdf_max_value`` computed per batch so that no whole-image pass
+        delays the first progress report)."""
+        g = self.g
+        return self.shading_points_at(g.p[idx], g.ng[idx], g.ns[idx], g.wo[idx], g.mat[idx])
+
+    def shading_points_at(self, p: NDArray, ng: NDArray, ns: NDArray, wo: NDArray, mat: NDArray,
+                          bsdf=None) -> ShadingPoints:
+        """Lightcut shading points at surface points (normals flipped toward ``wo``): BSDF and
+        visibility callbacks, the materials' bound ``bsdf_max_value`` at diffuse points,
+        :class:`.lightcuts.GlossyReceivers` at glossy ones; ``bsdf`` their BSDFs if built."""
+        scene = self.scene
+        if bsdf is None:
+            bsdf = scene.bsdf(mat, ns, ng, p)
 
         def eval_f(k, wi):
             return bsdf.subset(k).eval(wo[k], wi)
@@ -275,14 +328,14 @@ class Gather:
             return scene.tracer.visible(p[k], ng[k], q, qn)
 
         # Glossy points: per-cluster GGX bound (f_bound is no bound for a glossy lobe)
-        glossy = (GlossyReceivers.from_bsdf(bsdf, wo, g.ns[idx])
+        glossy = (GlossyReceivers.from_bsdf(bsdf, wo, ns)
                   if GLOSSY_CLUSTER_BOUND and not bsdf.all_diffuse else None)
-        f_bound = scene.bsdf_max_value(g.mat[idx], p)
+        f_bound = scene.bsdf_max_value(mat, p)
         # Rough glass and translucent surfaces transmit VPL light from the far side: |cos θ_x|
         # there, as the VPLs' normalisation (vpl.vpl_radiance) counts it
         through = ((bsdf.p_tr > 0.0) & ~bsdf.delta) | bsdf.translucent
         transmissive = through if through.any() else None
-        return ShadingPoints(p, g.ns[idx], wo, f_bound, eval_f, visible,
+        return ShadingPoints(p, ns, wo, f_bound, eval_f, visible,
                              transmissive=transmissive, glossy=glossy)
 
 
@@ -358,6 +411,25 @@ class _Sweep:
             self.stats["gather_incomplete"] = 1
             self.schedule.clock.cancelled = True
         return L, cut, done_pt, done
+
+    def radiance(self, pts: ShadingPoints, rng: np.random.Generator) -> NDArray:
+        """(P, 3) the clamped VPL light at any shading points (the bias compensation's
+        surfaces, :mod:`.bias_compensation`) by the gather's method: a stochastic cut of
+        ``stochastic_cut_size``, a lightcut to ``max_error`` or every VPL."""
+        s, vpls, tree = self.gather.settings, self.vpls, self.tree
+        if s.gather == "BRUTE_FORCE":
+            self.rays += pts.count * len(vpls)
+            return brute_force(vpls.position, vpls.normal, vpls.intensity, pts, clamp=self.clamp,
+                               keep_going=lambda: True)
+        if s.gather == "STOCHASTIC":
+            res = stochastic_lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts, rng,
+                                      cut_size=s.stochastic_cut_size, clamp=self.clamp, cdf=self.cdf)
+        else:
+            res = lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts, max_error=s.max_error,
+                           max_cut_size=s.max_cut_size, clamp=self.clamp, abs_floor=self.floor,
+                           error_mode=ERROR_MODES[s.lightcut_error])
+        self.rays += res.shadow_rays
+        return res.radiance
 
     def probe(self, k: int) -> tuple[NDArray, int]:
         """Pass :data:`PROBE_PASS` (independent draws) over the first ``k`` of ``pts_all``

@@ -106,6 +106,7 @@ from ..base import Clock, batch_pixels, progress_batch_pixels, run_passes
 from ..bdpt import BDPTIntegrator
 from ..path import PathIntegrator
 from .balance import DirectRival, PassVariance
+from .bias_compensation import compensates
 from .er_sampling import chain_starts, run_chains
 from .gather import Gather, Gathered, per_pixel, per_pixel_parts
 from .initialization import (ROUGH_MIN_PASSES, ROUGH_P_ERROR, RoughImage, indirect_energy, p_relative_error,
@@ -256,7 +257,9 @@ class ErcutsIntegrator:
         self._check()
         gmax = g_clamp(self.scene, s.clamp)
         with self._phase("vpls"):                 # 3. VPLs
-            vpls = self._make_vpls(first_hits_only(g), chains, e_d, gmax, rng)
+            # compensated: Ê1 of the unclamped image (bias_compensation's module docstring)
+            vpls = self._make_vpls(first_hits_only(g), chains, e_d,
+                                   np.inf if compensates(s, gmax) else gmax, rng)
         with self._phase("tree"):                 # 4. light tree
             tree = self._light_tree(vpls)
         with self._phase("cuts", check=False):    # 5. lightcuts (or the brute-force ablation)

@@ -1,0 +1,108 @@
+"""Bias compensation of the VPL geometry clamp (Kollig & Keller 2004, "Illumination in the
+presence of weak singularities", MCQMC 2004, §3).
+
+The gather clamps each VPL's geometry term, cosθ_v/d² ≤ g_max (:func:`.vpl.g_clamp`), so
+that a VPL close to a receiver cannot put a spike on it. What the clamp removes is light
+over short distances — along the edges where walls meet, under furniture, at door frames:
+a band of receivers 10–25 % too dark in the door scene (benchmarks/results/error_split.md).
+Written over the hemisphere of directions ω at a receiver x, with y(ω) the surface seen and
+L_o(y → x) its reflected radiance (which the VPLs stand for), the removed part is
+
+    ΔL(x) = ∫ f(x, ω_o, ω) |cosθ_x| · L_o(y → x) · w(x, y) dω,
+    w(x, y) = max(0, 1 − g_max·d²/cosθ_y) = 1 − min(1, g_max·d²/cosθ_y),
+
+since a VPL's unclamped geometry term cosθ_y/d² times the solid angle's dA = d²/cosθ_y dω is
+1. Kollig & Keller estimate ΔL by sampling ω from the BSDF at x (weight f|cos|/pdf), tracing
+to y and, where w > 0, evaluating L_o(y → x) with the same clamped VPL estimator plus its own
+compensation — a recursion in which w < 1 acts as absorption. Only y closer than
+1/√g_max can have w > 0 (cosθ_y ≤ 1), so the rays are short. Here L_o(y → x) is the direct
+light at y by light sampling (the VPLs of the default ``direct_light='NEE'`` carry light
+after at least one scattering, which starts with the direct light at y) plus the gather's
+clamped VPL estimate at y, and the recursion stops after :data:`COMPENSATION_DEPTH` levels:
+the bias left is that of the compensation's own clamp at the last level, a band of the
+band. With the compensation the VPLs are normalised by their *unclamped* image energy Ê1
+(:func:`.vpl.make_vpls`), so clamped gather + compensation is the unclamped VPL image in
+expectation: the image's energy is no longer moved from the edges onto the open walls.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ...scene import BuiltScene
+from ...vecmath import dot
+from .vpl import clamp_factor
+
+#: Levels of the recursion (level 1: the receivers' own clamped light; level k: the clamped
+#: light of the surfaces that compensate level k − 1).
+COMPENSATION_DEPTH = 3
+
+#: radiance_at(p, ng, ns, wo, mat) -> (N, 3): reflected radiance toward wo at surface points
+#: (normals flipped toward wo) by the clamped estimator.
+RadianceAt = Callable[[NDArray, NDArray, NDArray, NDArray, NDArray], NDArray]
+
+
+def compensation_weight(gmax: float, d2: NDArray, cos_y: NDArray) -> NDArray:
+    """(n,) w = max(0, 1 − g_max·d²/cosθ_y): the share of the unclamped geometry term
+    cosθ_y/d² that the clamp g_max removes (0 without a clamp and for cosθ_y ≤ 0)."""
+    return 1.0 - clamp_factor(gmax, d2, np.maximum(cos_y, 0.0))
+
+
+def reach(gmax: float) -> float:
+    """Distance beyond which the clamp removes nothing: cosθ_y/d² ≤ 1/d² ≤ g_max [m]."""
+    return float(1.0 / np.sqrt(gmax)) if np.isfinite(gmax) and gmax > 0 else np.inf
+
+
+def compensate(scene: BuiltScene, gmax: float, p: NDArray, ng: NDArray, ns: NDArray, wo: NDArray,
+               mat: NDArray, rng: np.random.Generator, radiance_at: RadianceAt,
+               depth: int = COMPENSATION_DEPTH) -> tuple[NDArray, NDArray]:
+    """ΔL at receivers (module docstring), one BSDF sample per receiver and level.
+
+    Args:
+        p, ng, ns, wo: (N, 3) receivers: position [m], normals flipped toward wo, unit
+            direction to the viewer; mat: (N,) shading keys.
+        radiance_at: the clamped estimator of L_o at the surfaces found (:data:`RadianceAt`).
+    Returns:
+        (N, 3) ΔL [W m⁻² sr⁻¹, the image's units], and (N,) bool the receivers whose first
+        sample found a surface with w > 0.
+    """
+    n = len(p)
+    out = np.zeros((n, 3))
+    near = np.zeros(n, bool)
+    if not np.isfinite(gmax) or n == 0:
+        return out, near
+    idx, beta = np.arange(n), np.ones((n, 3))
+    t_max = reach(gmax)
+    for level in range(depth):
+        bsdf = scene.bsdf(mat, ns, ng, p)
+        bs = bsdf.sample(wo, rng.random((len(idx), 3)))
+        go = np.flatnonzero(bs.valid & ~bs.is_delta & (bs.weight.max(axis=1) > 0))
+        if len(go) == 0:
+            break
+        wi = bs.wi[go]
+        surf = scene.intersect(scene.tracer.offset(p[go], ng[go], wi), wi, t_max)
+        h = np.flatnonzero(surf.valid)
+        y = surf.subset(h)
+        wo_y = -wi[h]
+        sign = np.where(dot(y.ng, wo_y) < 0.0, -1.0, 1.0)[:, None]
+        ng_y, ns_y = y.ng * sign, y.ns * sign
+        w = compensation_weight(gmax, y.t ** 2, dot(ns_y, wo_y))
+        b = beta[go[h]] * bs.weight[go[h]] * w[:, None]
+        live = np.flatnonzero(b.max(axis=1) > 0.0)
+        if len(live) == 0:
+            break
+        idx, beta = idx[go[h[live]]], b[live]
+        if level == 0:
+            near[idx] = True
+        p, ng, ns, wo, mat = y.p[live], ng_y[live], ns_y[live], wo_y[live], y.mat[live]
+        np.add.at(out, idx, beta * radiance_at(p, ng, ns, wo, mat))
+    return out, near
+
+
+def compensates(settings, gmax: float) -> bool:
+    """The render compensates the clamp: ``clamp_compensation`` on, a clamp set, and the
+    direct light by next-event estimation (with ``direct_light='VPL'`` emitter VPLs stand for
+    the direct light too, and L_o(y → x) would need the emission at y: not compensated)."""
+    return bool(settings.clamp_compensation) and np.isfinite(gmax) and settings.direct_light == "NEE"

@@ -1,0 +1,108 @@
+"""The VPL clamp's bias compensation (Kollig & Keller 2004; :mod:`ercuts_core.integrators.ercuts.
+bias_compensation`): its weight, its estimate of the removed light against a quadrature in a
+corner, and the render's switch."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from ercuts_core import RenderSettings, render
+from ercuts_core.integrators.ercuts.bias_compensation import (compensate, compensates,
+                                                               compensation_weight, reach)
+from ercuts_core.integrators.ercuts.vpl import clamp_factor
+from ercuts_core.scene import BuiltScene
+from ercuts_core.scenes import _Builder, _camera, _diffuse_table, closed_room
+from ercuts_core.validate import sanitize
+
+RHO = 0.5          # the corner's albedo
+L0 = 2.0           # radiance the wall sends to the floor
+GMAX = 4.0         # the clamp: cosθ/d² ≤ 4 m⁻², reach 0.5 m
+
+
+@pytest.fixture(scope="module")
+def corner():
+    """A floor (y = 0, normal +y) meeting a wall (x = 0, normal +x), 4 m each way."""
+    b = _Builder()
+    o = b.object("Corner")
+    b.quad((0, 0, -4), (0, 0, 4), (4, 0, 4), (4, 0, -4), 0, o)
+    b.quad((0, 0, -4), (0, 4, -4), (0, 4, 4), (0, 0, 4), 0, o)
+    desc = b.description(_diffuse_table([("Grey", [RHO] * 3)]), _camera((3, 2, 0), (0, 0, 0), 8, 6))
+    return BuiltScene(sanitize(desc).desc, threads=1)
+
+
+def test_weight_is_the_share_the_clamp_removes():
+    d2 = np.array([0.01, 0.04, 0.25, 1.0, 0.04])
+    cos = np.array([1.0, 0.5, 1.0, 1.0, 0.0])
+    w = compensation_weight(GMAX, d2, cos)
+    assert np.allclose(w, [0.96, 0.68, 0.0, 0.0, 0.0])
+    assert np.allclose(w + clamp_factor(GMAX, d2, np.maximum(cos, 1e-300)), 1.0)
+    assert (compensation_weight(np.inf, d2, cos) == 0).all()
+    assert reach(GMAX) == 0.5 and reach(np.inf) == np.inf
+
+
+def removed_light(s: float) -> float:
+    """ΔL at a floor point s from the wall: (ρ/π)·L0·∫_wall cosθ_x cosθ_y/d² · w dA, in polar
+    coordinates r around the wall's foot point (∫ sinφ dφ over the half-disc = 2):
+    ∫ 2 r² s/(s² + r²)² · max(0, 1 − g·(s² + r²)^{3/2}/s) dr."""
+    r_max = np.sqrt((s / GMAX) ** (2 / 3) - s * s)
+
+    def f(r):
+        d2 = s * s + r * r
+        return 2 * r * r * s / d2 ** 2 * max(0.0, 1.0 - GMAX * d2 ** 1.5 / s)
+    return RHO / np.pi * L0 * quad(f, 0.0, r_max, epsabs=1e-12, limit=200)[0]
+
+
+@pytest.mark.parametrize("s", [0.03, 0.1, 0.2])
+def test_compensation_estimates_the_removed_light(corner, s):
+    """One level (the wall's L_o given): the mean over 200 000 receivers at distance s from the
+    wall agrees with the quadrature within 4 standard errors of the mean, and the error is
+    small enough (< 3 %) for the check to mean something."""
+    n = 200_000
+    p = np.tile([s, 0.0, 0.0], (n, 1))
+    up = np.tile([0.0, 1.0, 0.0], (n, 1))
+
+    def radiance_at(q, ng, ns, wo, mat):          # the wall shines L0, the floor nothing
+        return np.where((q[:, 0] < 1e-6)[:, None], L0, 0.0) * np.ones((len(q), 3))
+
+    out, near = compensate(corner, GMAX, p, up, up, up, np.zeros(n, np.int64), np.random.default_rng(5),
+                           radiance_at, depth=1)
+    y = out[:, 1]
+    mean, se = y.mean(), y.std(ddof=1) / np.sqrt(n)
+    true = removed_light(s)
+    assert se < 0.03 * true
+    assert abs(mean - true) < 4 * se, (mean, true, se)
+    assert np.array_equal(near, out[:, 0] > 0)
+
+
+def test_no_clamp_no_compensation(corner):
+    p = np.array([[0.1, 0.0, 0.0]])
+    up = np.array([[0.0, 1.0, 0.0]])
+    out, near = compensate(corner, np.inf, p, up, up, up, np.zeros(1, np.int64), np.random.default_rng(0),
+                           lambda *a: np.ones((len(a[0]), 3)))
+    assert not out.any() and not near.any()
+
+
+def test_the_switch():
+    s = RenderSettings()
+    assert s.clamp_compensation and compensates(s, 4.0)
+    assert not compensates(s, np.inf)                                       # clamp 0
+    assert not compensates(RenderSettings(clamp_compensation=False), 4.0)
+    assert not compensates(RenderSettings(direct_light="VPL"), 4.0)
+
+
+@pytest.fixture(scope="module")
+def room_renders():
+    """The closed room, compensated and not, same seed (small and fast)."""
+    scene = closed_room(32, 24)
+    base = dict(integrator="ERCUTS", rough_samples=4, chain_length=20, e1_samples=32, seed=3, threads=1)
+    return {c: render(scene, RenderSettings(clamp_compensation=c, **base)) for c in (True, False)}
+
+
+def test_render_reports_the_compensation(room_renders):
+    """The compensated render reports the compensation (points reached, energy added), and the
+    ablation does not run it."""
+    on, off = room_renders[True].stats, room_renders[False].stats
+    assert 0 < on["compensated_points"] < 1 and on["compensated_energy"] > 0
+    assert "compensated_points" not in off and "compensated_energy" not in off
+    assert np.isfinite(room_renders[True].image).all()

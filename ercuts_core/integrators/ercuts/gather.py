@@ -57,6 +57,9 @@ RIVAL_START = 1.5
 #: and Esc between chunks), and the seed salt of its draws.
 COMPENSATION_CHUNK = 1 << 14
 COMPENSATION_SALT = 0xB1A5
+#: Stochastic cut size at the compensation's surfaces (at most ``stochastic_cut_size``): their
+#: light is weighted by the clamp's share w < 1 and one BSDF sample, whose noise dominates.
+COMPENSATION_CUT = 64
 #: Consecutive shading points kept together in the shuffled gather order (coherent rays).
 GATHER_RUN = 32
 #: Glossy shading points get the per-cluster GGX material bound (:class:`.lightcuts.
@@ -415,7 +418,7 @@ class _Sweep:
     def radiance(self, pts: ShadingPoints, rng: np.random.Generator) -> NDArray:
         """(P, 3) the clamped VPL light at any shading points (the bias compensation's
         surfaces, :mod:`.bias_compensation`) by the gather's method: a stochastic cut of
-        ``stochastic_cut_size``, a lightcut to ``max_error`` or every VPL."""
+        :data:`COMPENSATION_CUT` nodes, a lightcut to ``max_error`` or every VPL."""
         s, vpls, tree = self.gather.settings, self.vpls, self.tree
         if s.gather == "BRUTE_FORCE":
             self.rays += pts.count * len(vpls)
@@ -423,7 +426,8 @@ class _Sweep:
                                keep_going=lambda: True)
         if s.gather == "STOCHASTIC":
             res = stochastic_lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts, rng,
-                                      cut_size=s.stochastic_cut_size, clamp=self.clamp, cdf=self.cdf)
+                                      cut_size=min(s.stochastic_cut_size, COMPENSATION_CUT),
+                                      clamp=self.clamp, cdf=self.cdf)
         else:
             res = lightcut(tree, vpls.position, vpls.normal, vpls.intensity, pts, max_error=s.max_error,
                            max_cut_size=s.max_cut_size, clamp=self.clamp, abs_floor=self.floor,

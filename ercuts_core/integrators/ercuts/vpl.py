@@ -18,7 +18,11 @@ certainly shines), one-sample MIS over the mixture [Veach 1997 §9.2.2] (:func:`
 The shading uses the *same* BRDF, visibility and geometry clamp as the final gather, as
 the rule in algorithm.md §D.4 requires, and E1 is the sum of *pixel values* — integrals
 over the pixel — which the gather estimates with jittered shading points
-(:func:`build_gbuffer`).
+(:func:`build_gbuffer`). When the gather compensates the clamp (the default,
+:mod:`.bias_compensation`) the gather's image is the unclamped one in expectation, so E1 is
+estimated without the clamp (``gmax`` = inf): with the clamped E1 every VPL's clamped energy
+was moved from the edges it lights at short range onto the rest of its image (the door
+scene: a band 10–25 % too dark along every edge, the open walls ≈ 5 % too bright).
 """
 from __future__ import annotations
 

@@ -139,7 +139,7 @@ class PathIntegrator(Integrator):
                 late = late | (clear & (nd == 1))
             nee = self._counted(depth + 1, seen, late, nd + 1)
             if not lights.empty and nee.any():
-                L_nee = self._next_event(surf, wo, bsdf, rng)
+                L_nee = next_event(scene, surf, wo, bsdf, rng)
                 L[min(depth + 1, 2), idx] += beta * L_nee * nee[:, None]
             # Sample the BSDF for the next bounce.
             bs = bsdf.sample(wo, rng.random((len(idx), 3)))
@@ -178,10 +178,6 @@ class PathIntegrator(Integrator):
             return
         t = np.where(surf.valid[r], surf.t[r], np.inf)
         L[idx[r]] += beta[r] * self.scene.lights.radiance_along(o[r], d[r], t)
-
-    def _next_event(self, surf, wo: NDArray, bsdf: Bsdf, rng: np.random.Generator) -> NDArray:
-        """(N, 3) direct light at the surfaces (:func:`next_event`, MIS-weighted)."""
-        return next_event(self.scene, surf, wo, bsdf, rng)
 
 
 def next_event(scene, surf, wo: NDArray, bsdf: Bsdf, rng: np.random.Generator, mis: bool = True) -> NDArray:

@@ -205,7 +205,7 @@ class Gather:
         the sweep so that the sweep's pacing sees the time it took; a cancel stops it between
         chunks (the gather then stops too)."""
         s, g, scene = self.settings, self.g, self.scene
-        if not compensates(s, gmax) or len(sweep.vpls) == 0:
+        if not compensates(s, gmax):
             return None
         pts = np.flatnonzero(g.valid)
         out = np.zeros((len(g.pixel), 3))

@@ -14,7 +14,8 @@ def test_chunked_gbuffer_equals_one_batch_and_polls(monkeypatch):
     monkeypatch.setattr(vpl, "GBUFFER_CHUNK", 100)
     seen = []
     parts, d_parts = vpl.build_gbuffer(scene, 2, np.random.default_rng(5), poll=seen.append)
-    assert len(seen) == 4 and seen[-1] == 1.0 and seen == sorted(seen)      # 384 rays / 100
+    # once the rays are generated, then after each of the 4 chunks of 384 rays / 100
+    assert len(seen) == 5 and seen[0] == 0.0 and seen[-1] == 1.0 and seen == sorted(seen)
     np.testing.assert_array_equal(d_parts, d_whole)
     for field in ("valid", "p", "ng", "ns", "prim", "mat", "t"):
         np.testing.assert_array_equal(getattr(parts.surf, field), getattr(whole.surf, field))

@@ -76,8 +76,9 @@ def build_gbuffer(scene: BuiltScene, samples: int, rng: np.random.Generator,
                   jitter: NDArray | None = None, poll=None) -> tuple[GBuffer, NDArray]:
     """Trace ``samples`` jittered camera rays per window pixel; returns the G-buffer and rays' d.
 
-    ``poll(fraction)`` is called after every :data:`GBUFFER_CHUNK` rays (a 1080p G-buffer
-    takes ≈ 1.4 s on 2 cores: progress and Esc stay responsive); it may raise to stop.
+    ``poll(fraction)`` is called once the camera rays are generated and after every
+    :data:`GBUFFER_CHUNK` rays (a 1080p G-buffer takes ≈ 1.4 s on 2 cores: progress and Esc
+    stay responsive); it may raise to stop.
 
     ``jitter``: (n_pixels·samples, 2) positions in the pixel, in [0, 1)² (default: uniform
     random from ``rng``; progressive renders pass stratified ones,
@@ -94,6 +95,8 @@ def build_gbuffer(scene: BuiltScene, samples: int, rng: np.random.Generator,
     raster = w.raster(pix).astype(np.float64)
     raster += rng.random((len(pix), 2)) if jitter is None else jitter
     o, d = scene.camera.generate_rays(raster, scene.camera.lens_samples(rng, len(pix)))
+    if poll is not None:
+        poll(0.0)
     parts = []
     for start in range(0, max(len(pix), 1), GBUFFER_CHUNK):
         parts.append(scene.intersect(o[start:start + GBUFFER_CHUNK], d[start:start + GBUFFER_CHUNK]))

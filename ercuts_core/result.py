@@ -15,7 +15,7 @@ VPL_KEYS = ("P", "P_all", "seed_paths", "chains", "chain_steps", "chain_states",
             "vpl_energy_ratio", "nan_acceptances")
 CUT_KEYS = ("cut_size_mean", "cut_size_max", "cut_bound_unmet", "max_error_for_time_limit", "cut_cap_for_time_limit",
             "paced_points_for_time_limit", "gather_shadow_rays",
-            "clamped_energy", "compensated_points", "compensated_energy", "compensation_seconds",
+            "clamped_energy", "compensated_points", "compensated_energy", "compensation_seconds", "compensation_rays",
             "gather_incomplete")
 
 

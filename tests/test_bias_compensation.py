@@ -10,6 +10,8 @@ from scipy.integrate import quad
 from ercuts_core import RenderSettings, render
 from ercuts_core.integrators.ercuts.bias_compensation import (compensate, compensates,
                                                                compensation_weight, reach)
+from ercuts_core.integrators.ercuts.gather import (COMPENSATION_MAX_RAYS, COMPENSATION_RAYS,
+                                                   compensation_rays)
 from ercuts_core.integrators.ercuts.vpl import clamp_factor
 from ercuts_core.scene import BuiltScene
 from ercuts_core.scenes import _Builder, _camera, _diffuse_table, closed_room
@@ -104,5 +106,13 @@ def test_render_reports_the_compensation(room_renders):
     ablation does not run it."""
     on, off = room_renders[True].stats, room_renders[False].stats
     assert 0 < on["compensated_points"] < 1 and on["compensated_energy"] > 0
+    assert on["compensation_rays"] == compensation_rays(32 * 24) == 16     # a small film: the most
     assert "compensated_points" not in off and "compensated_energy" not in off
     assert np.isfinite(room_renders[True].image).all()
+
+
+def test_rays_per_point_follow_the_film_size():
+    """Small films average several compensation rays per point, production sizes send one."""
+    assert compensation_rays(160 * 120) == COMPENSATION_RAYS // (160 * 120) == 13
+    assert compensation_rays(640 * 480) == compensation_rays(1920 * 1080) == 1
+    assert compensation_rays(0) == compensation_rays(10) == COMPENSATION_MAX_RAYS

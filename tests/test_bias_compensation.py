@@ -8,10 +8,9 @@ import pytest
 from scipy.integrate import quad
 
 from ercuts_core import RenderSettings, render
-from ercuts_core.integrators.ercuts.bias_compensation import (compensate, compensates,
+from ercuts_core.integrators.ercuts.bias_compensation import (COMPENSATION_MAX_RAYS, COMPENSATION_RAYS,
+                                                               compensate, compensates, compensation_rays,
                                                                compensation_weight, reach)
-from ercuts_core.integrators.ercuts.gather import (COMPENSATION_MAX_RAYS, COMPENSATION_RAYS,
-                                                   compensation_rays)
 from ercuts_core.integrators.ercuts.vpl import clamp_factor
 from ercuts_core.scene import BuiltScene
 from ercuts_core.scenes import _Builder, _camera, _diffuse_table, closed_room

@@ -21,7 +21,7 @@ from ...scene import BuiltScene
 from ...settings import RenderSettings
 from ..path import next_event
 from .balance import DirectRival, PassVariance
-from .bias_compensation import compensate, compensates
+from .bias_compensation import compensate, compensates, compensation_rays
 from .interpolation import Interpolation, auto_spacing, grid_offset, plan_interpolation, same_surface
 from .lightcuts import GlossyReceivers, ShadingPoints, brute_force, lightcut
 from .pacing import MAX_PACED_ERROR, GatherPace, Schedule
@@ -57,14 +57,6 @@ RIVAL_START = 1.5
 #: and Esc between chunks), and the seed salt of its draws.
 COMPENSATION_CHUNK = 1 << 14
 COMPENSATION_SALT = 0xB1A5
-#: BSDF rays of the compensation per iteration: each shading point sends
-#: :func:`compensation_rays` = COMPENSATION_RAYS // points of them (1 … COMPENSATION_MAX_RAYS),
-#: averaged. With one ray per point the compensation — a path-traced term at the 1–3 % of
-#: points near a corner — puts its own noise on those pixels: at 1080p it averages out over
-#: many small pixels, at 160×120 it made the error 1.1–3.6× that of no compensation (README,
-#: "VPL clamp").
-COMPENSATION_RAYS = 1 << 18
-COMPENSATION_MAX_RAYS = 16
 #: Stochastic cut size at the compensation's surfaces (at most ``stochastic_cut_size``): their
 #: light is weighted by the clamp's share w < 1 and one BSDF sample, whose noise dominates.
 COMPENSATION_CUT = 64
@@ -105,13 +97,6 @@ def per_pixel_parts(values: NDArray, S: int) -> NDArray:
     if S == 1:
         return values.reshape(K, Q, 3)
     return values.reshape(K, Q // S, S, 3).mean(axis=2)
-
-
-def compensation_rays(points: int) -> int:
-    """BSDF rays per shading point of the clamp's compensation in one iteration: as many as
-    keep the iteration's total near :data:`COMPENSATION_RAYS`, at least 1, at most
-    :data:`COMPENSATION_MAX_RAYS` (160×120: 13; from 640×480 on: 1)."""
-    return int(np.clip(COMPENSATION_RAYS // max(points, 1), 1, COMPENSATION_MAX_RAYS))
 
 
 class Gather:
@@ -228,7 +213,7 @@ class Gather:
         m = compensation_rays(len(pts))
         step = max(COMPENSATION_CHUNK // m, 1)
         for start in range(0, len(pts), step):
-            idx = np.repeat(pts[start:start + step], m)      # m rays per point
+            idx = pts[start:start + step]
             rng = np.random.default_rng([s.seed, COMPENSATION_SALT, self.iteration, start])
 
             def radiance_at(p, ng, ns, wo, mat):
@@ -239,10 +224,9 @@ class Gather:
                 return L
 
             got, hit = compensate(scene, gmax, g.p[idx], g.ng[idx], g.ns[idx], g.wo[idx], g.mat[idx], rng,
-                                  radiance_at)
-            got, idx = got.reshape(-1, m, 3).mean(axis=1), idx[::m]
+                                  radiance_at, rays=m)
             out[idx] = got if g.weight is None else got * g.weight[idx]
-            near += int(np.count_nonzero(hit.reshape(-1, m).any(axis=1)))
+            near += int(np.count_nonzero(hit))
             f = (start + len(idx)) / len(pts)
             if not schedule.clock.poll(schedule.fraction("Lightcuts", 0.0),
                                        f"Lightcuts: clamp compensation {100 * f:.0f}%"):

@@ -707,6 +707,19 @@ def _load_note(runs) -> str:
             f"(on {os.cpu_count()} cores; above that, other jobs shared the CPU)")
 
 
+def _render_days(runs) -> str:
+    """Which days each engine's cells were rendered on (timed cells compare only within a day:
+    this machine's speed has differed by up to 2× between days)."""
+    days: dict[str, set] = {}
+    for r in runs:
+        days.setdefault(r["engine"], set()).add(str(r.get("finished", "?"))[:10])
+    by_span: dict[str, list] = {}
+    for e, d in days.items():
+        span = min(d) if len(d) == 1 else f"{min(d)} – {max(d)}"
+        by_span.setdefault(span, []).append(e)
+    return "; ".join(f"{', '.join(es)} rendered {span}" for span, es in sorted(by_span.items(), reverse=True))
+
+
 def _cpu_name() -> str:
     try:
         with open("/proc/cpuinfo") as fh:
@@ -757,8 +770,9 @@ def write_report(args) -> str:
              f"Machine: {os.cpu_count()} cores, {_cpu_name()}, "
              f"Python {platform.python_version()}; commit {_git_commit()}; generated {_now()}.",
              f"Resolution {w}×{h}; budgets {', '.join(f'{b:g} s' for b in budgets)} of wall time per render; "
-             f"{len(seeds)} seed(s) per cell; all renders one after another in one process; "
-             f"{_load_note(runs)}.", "",
+             f"{len(seeds)} seed(s) per cell; renders one after another; "
+             f"{_load_note(runs)}. {_render_days(runs)} (this machine's speed has differed by up to 2× "
+             "between days, so only cells of one day compare fairly).", "",
              "Engines: **ERCUTS**, **BDPT** and **PATH** (the Ercuts core at its default settings — "
              "`max_depth` 64 — with `RenderSettings.time_limit` = budget, covering every phase), "
              "**CYCLES** (bpy module, CPU, all cores, matched unbiased settings: 63 bounces as the "

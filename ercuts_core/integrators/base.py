@@ -23,11 +23,14 @@ from numpy.typing import NDArray
 
 from ..film import Film
 from ..memory import MemoryPlan
+from .. import qmc
+from ..qmc import PassSequence
 from ..scene import BuiltScene, Surface
 from ..settings import RenderSettings
 
 if TYPE_CHECKING:
     from ..bsdf import Bsdf
+    from ..qmc import PixelSequence
 
 Progress = Callable[[float, str], "bool | None"]
 Preview = Callable[[np.ndarray], None]
@@ -114,7 +117,9 @@ def run_passes(integrator: "Integrator", film: Film, clock: Clock, *, samples: i
     """The pass loop: up to ``samples`` passes of ``integrator`` over ``film``'s window.
 
     Each pass renders every pixel once, in batches of ``batch`` pixels with random streams
-    ``[seed, *key, pass, batch start]``, into its own film, merged into ``film`` when
+    ``[seed, *key, pass, batch start]`` and the pass's randomised Sobol point of the stream
+    ``(seed, *key)`` (:class:`~ercuts_core.qmc.PassSequence`: over the passes a pixel's
+    samples are stratified; integrators that do not use it ignore it), into its own film, merged into ``film`` when
     complete; a pass cut short (cancel, time limit) is kept only when it is the first, so
     every pixel keeps the same sample count. After every batch progress is reported as
     ``"{phase} sample k/samples"`` at ``fraction(f)`` of the render, f being the phase's
@@ -135,9 +140,10 @@ def run_passes(integrator: "Integrator", film: Film, clock: Clock, *, samples: i
     enough = False
     for k in range(samples):
         part = Film(window)
+        sequence = PassSequence((s.seed, *key), first + k) if qmc.ENABLED else None
         for start in range(0, n, batch):
             rng = np.random.default_rng([s.seed, *key, first + k, start])
-            integrator.render_batch(part, np.arange(start, min(n, start + batch)), rng)
+            integrator.render_batch(part, np.arange(start, min(n, start + batch)), rng, sequence)
             f = (k + min(n, start + batch) / n) / samples
             if deadline is not None:    # with many samples, the time share says how far
                 f = max(f, (time.perf_counter() - t0) / max(deadline - t0, 1e-9))
@@ -163,13 +169,20 @@ class Integrator:
         self.camera = scene.camera
         self.window = scene.camera.window
 
-    def camera_rays(self, pix: NDArray, rng: np.random.Generator) -> tuple[NDArray, NDArray]:
+    def camera_rays(self, pix: NDArray, rng: np.random.Generator,
+                    u: "PixelSequence | None" = None) -> tuple[NDArray, NDArray]:
         """Jittered rays through window pixels ``pix`` (N,) (box filter; a lens point each
-        with depth of field)."""
+        with depth of field); the jitter and lens numbers from ``u`` (the pass's quasi-random
+        numbers of ``pix``, :mod:`ercuts_core.qmc`) when given, else from ``rng``."""
         w = self.window
         raster = w.raster(pix).astype(np.float64)
-        raster += rng.random((len(pix), 2))
-        return self.camera.generate_rays(raster, self.camera.lens_samples(rng, len(pix)))
+        if u is None:
+            raster += rng.random((len(pix), 2))
+            return self.camera.generate_rays(raster, self.camera.lens_samples(rng, len(pix)))
+        lanes = np.arange(len(pix))
+        raster += u.take(lanes, 2)
+        lens = u.take(lanes, 2) if self.camera.has_lens else None
+        return self.camera.generate_rays(raster, lens)
 
     def record_first_hit(self, film: Film, pix: NDArray, keep: NDArray, surf: Surface | None,
                          bsdf: "Bsdf | None") -> None:
@@ -194,5 +207,8 @@ class Integrator:
             return surf.valid.astype(np.float64)
         return np.ones(len(surf.valid))
 
-    def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator) -> None:
+    def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator,
+                     sequence: "PassSequence | None" = None) -> None:
+        """One camera sample per pixel ``pix`` (N,) into ``film``, from ``rng`` and, where
+        the integrator uses it, the pass's quasi-random ``sequence``."""
         raise NotImplementedError

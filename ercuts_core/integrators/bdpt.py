@@ -335,7 +335,10 @@ class BDPTIntegrator(Integrator):
         self.traced_indirect = 0.0
 
     # ================================================================== driver
-    def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator) -> None:
+    def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator, sequence=None) -> None:
+        """One sample per pixel ``pix`` (N,) into ``film``, in batches of ``max_lanes``; all
+        its numbers come from ``rng`` (``sequence``, the pass loop's quasi-random numbers,
+        is not used: a BDPT sample's dimensions vary with its subpaths' lengths)."""
         for start in range(0, len(pix), self.max_lanes):
             self._render_lanes(film, pix[start:start + self.max_lanes], rng)
 

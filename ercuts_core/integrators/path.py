@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from ..bsdf import Bsdf
 from ..film import Film
 from ..lights import AREA, POINT, SUN
+from ..qmc import PassSequence
 from ..sampling import power_heuristic
 from ..vecmath import dot
 from .base import Integrator
@@ -74,11 +75,16 @@ class PathIntegrator(Integrator):
             return late | (nd <= 1)
         return seen | (scatter <= 1)
 
-    def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator) -> None:
+    def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator,
+                     sequence: PassSequence | None = None) -> None:
+        """One sample per pixel ``pix`` (N,) into ``film``; its numbers come from ``sequence``
+        (the pass's randomised Sobol point, :mod:`ercuts_core.qmc`) when given, else from
+        ``rng`` alone."""
         scene, s = self.scene, self.settings
         lights, tracer = scene.lights, scene.tracer
         n = len(pix)
-        o, d = self.camera_rays(pix, rng)
+        u = sequence.bind(pix, rng) if sequence is not None else None
+        o, d = self.camera_rays(pix, rng, u)
         L = np.zeros((3, n, 3))            # radiance by path class (emission, direct, indirect)
         beta = np.ones((n, 3))
         idx = np.arange(n)                 # lane → sample
@@ -138,16 +144,17 @@ class PathIntegrator(Integrator):
             if clear is not None:       # a VPL cannot sit on the mirror or glass after x_d
                 late = late | (clear & (nd == 1))
             nee = self._counted(depth + 1, seen, late, nd + 1)
+            u_nee = None if u is None else u.take(idx, 3)     # drawn either way: fixed dimensions
             if not lights.empty and nee.any():
-                L_nee = next_event(scene, surf, wo, bsdf, rng)
+                L_nee = next_event(scene, surf, wo, bsdf, rng, u=u_nee)
                 L[min(depth + 1, 2), idx] += beta * L_nee * nee[:, None]
             # Sample the BSDF for the next bounce.
-            bs = bsdf.sample(wo, rng.random((len(idx), 3)))
+            bs = bsdf.sample(wo, rng.random((len(idx), 3)) if u is None else u.take(idx, 3))
             beta = beta * bs.weight
             alive = bs.valid & (beta.max(axis=1) > 0)
             if depth + 1 >= s.rr_depth:
                 q = np.minimum(1.0, beta.max(axis=1))
-                survive = rng.random(len(idx)) < q
+                survive = (rng.random(len(idx)) if u is None else u.take(idx, 1)[:, 0]) < q
                 beta = beta / np.where(survive, q, 1.0)[:, None]
                 alive &= survive
             keep = np.flatnonzero(alive)
@@ -180,15 +187,18 @@ class PathIntegrator(Integrator):
         L[idx[r]] += beta[r] * self.scene.lights.radiance_along(o[r], d[r], t)
 
 
-def next_event(scene, surf, wo: NDArray, bsdf: Bsdf, rng: np.random.Generator, mis: bool = True) -> NDArray:
+def next_event(scene, surf, wo: NDArray, bsdf: Bsdf, rng: np.random.Generator, mis: bool = True,
+               u: NDArray | None = None) -> NDArray:
     """(N, 3) direct light at the surfaces ``surf`` (p, ns, ng) toward ``wo``: f·|cos|·Li·V·w/pdf,
     one light sample each. ``w`` is the power heuristic against BSDF sampling for lights a
     BSDF-sampled ray can hit (emissive triangles, the world) [Veach 1997 §9.2]; with ``mis``
     False it is 1 — the whole direct light by light sampling, for callers that do not also
-    trace BSDF rays to the lights (the clamp's bias compensation, :mod:`.ercuts.bias_compensation`)."""
+    trace BSDF rays to the lights (the clamp's bias compensation, :mod:`.ercuts.bias_compensation`).
+    ``u`` (N, 3): the light choice's and the light point's uniforms (default: from ``rng``)."""
     lights, tracer = scene.lights, scene.tracer
     n = len(wo)
-    ls = lights.illuminate(surf.p, rng.random(n), rng.random((n, 2)))
+    u_sel, u_pos = (rng.random(n), rng.random((n, 2))) if u is None else (u[:, 0], u[:, 1:3])
+    ls = lights.illuminate(surf.p, u_sel, u_pos)
     f, pdf_bsdf = bsdf.eval_pdf(wo, ls.wi)
     cos = np.abs(dot(surf.ns, ls.wi))
     contrib = f * (cos / np.where(ls.valid, ls.pdf_w, 1.0))[:, None] * ls.Li

@@ -90,6 +90,7 @@ from ..arrays import take_rows
 from ..bsdf import Bsdf
 from ..film import Film, path_class
 from ..lights import AREA, ENV, POINT, SUN, TRI
+from ..qmc import PassSequence, PixelSequence
 from ..sampling import luminance
 from ..scene import BuiltScene
 from ..settings import RenderSettings
@@ -335,19 +336,26 @@ class BDPTIntegrator(Integrator):
         self.traced_indirect = 0.0
 
     # ================================================================== driver
-    def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator, sequence=None) -> None:
-        """One sample per pixel ``pix`` (N,) into ``film``, in batches of ``max_lanes``; all
-        its numbers come from ``rng`` (``sequence``, the pass loop's quasi-random numbers,
-        is not used: a BDPT sample's dimensions vary with its subpaths' lengths)."""
+    def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator,
+                     sequence: "PassSequence | None" = None) -> None:
+        """One sample per pixel ``pix`` (N,) into ``film``, in batches of ``max_lanes``. With
+        the pass loop's ``sequence`` (:mod:`ercuts_core.qmc`) the first dimensions of a
+        sample — the camera jitter (and lens), the light subpath's emission, and the light
+        sample of next-event estimation (s = 1) at the first camera vertex — are the pass's
+        randomised Sobol point, so over the passes they are stratified per pixel; the others
+        (later bounces) come from ``rng``."""
         for start in range(0, len(pix), self.max_lanes):
-            self._render_lanes(film, pix[start:start + self.max_lanes], rng)
+            chunk = pix[start:start + self.max_lanes]
+            self._render_lanes(film, chunk, rng, None if sequence is None else sequence.bind(chunk, rng))
 
-    def _render_lanes(self, film: Film, pix: NDArray, rng: np.random.Generator) -> None:
+    def _render_lanes(self, film: Film, pix: NDArray, rng: np.random.Generator,
+                      u: "PixelSequence | None" = None) -> None:
         n = len(pix)
         self._pending: list[Connection] = []                         # rows for on_connections
         # Trace the camera and light subpaths
-        cam, alpha = self._camera_subpaths(film, pix, rng)
-        lig, no_s0 = self._light_subpaths(n, rng)
+        cam, alpha = self._camera_subpaths(film, pix, rng, u)
+        lig, no_s0 = self._light_subpaths(n, rng, u)
+        u_nee = None if u is None else u.take(np.arange(n), 3)      # s = 1 at t = 2
         L = np.zeros((3, n, 3))                  # by path class (film.path_class of s + t − 2)
         self._delta_counts = _delta_counts(cam, lig)
         self._clear = (cam.clear, lig.clear)
@@ -356,7 +364,7 @@ class BDPTIntegrator(Integrator):
             for lane, s, t in self._rows_s0(cam).chunks(self.max_rows):
                 self._accumulate(L, pix, lane, s, t, *self._hit_emitter(cam, lane, s, t))
             for lane, s, t in self._rows_s1(cam).chunks(self.max_rows):
-                keep, c, sample = self._connect_light(cam, lane, s, t, rng)
+                keep, c, sample = self._connect_light(cam, lane, s, t, rng, u_nee)
                 self._accumulate(L, pix, lane, s, t, keep, c, sample)
             for lane, s, t in self._rows_general(cam, lig).chunks(self.max_rows):
                 self._accumulate(L, pix, lane, s, t,
@@ -451,23 +459,31 @@ class BDPTIntegrator(Integrator):
                 img[:, ch] += np.bincount(pix[m], weights=c[m, ch], minlength=npix)
 
     # ================================================================== subpaths
-    def _camera_subpaths(self, film: Film, pix: NDArray, rng: np.random.Generator):
-        """Camera subpaths for window pixels ``pix``; records alpha and first-hit AOVs."""
+    def _camera_subpaths(self, film: Film, pix: NDArray, rng: np.random.Generator,
+                         u: "PixelSequence | None" = None):
+        """Camera subpaths for window pixels ``pix``; records alpha and first-hit AOVs. The
+        jitter and lens numbers come from ``u`` when given (:meth:`render_batch`)."""
         n = len(pix)
         cam = Subpaths(self.n_cam, n)
         # As Integrator.camera_rays (same random numbers), keeping the raster positions
         w = self.window
         cam.raster = w.raster(pix).astype(np.float64)
-        cam.raster += rng.random((n, 2))
-        o, d = self.camera.generate_rays(cam.raster, self.camera.lens_samples(rng, n))
+        if u is None:
+            cam.raster += rng.random((n, 2))
+            lens = self.camera.lens_samples(rng, n)
+        else:
+            cam.raster += u.take(np.arange(n), 2)
+            lens = u.take(np.arange(n), 2) if self.camera.has_lens else None
+        o, d = self.camera.generate_rays(cam.raster, lens)
         cam.p[0] = o
         cam.beta[0] = 1.0
         alpha = self._random_walk(cam, np.arange(n), o, d, np.ones((n, 3)), np.zeros(n),
                                   rng, importance=False, film=film, pix=pix)
         return cam, alpha
 
-    def _light_subpaths(self, n: int, rng: np.random.Generator):
-        """One light subpath per lane, started with :meth:`LightSet.emit`.
+    def _light_subpaths(self, n: int, rng: np.random.Generator, u: "PixelSequence | None" = None):
+        """One light subpath per lane, started with :meth:`LightSet.emit` (its five numbers
+        from ``u`` when given, :meth:`render_batch`).
 
         Returns:
             the subpaths and (N,) ``no_s0``: the path's light cannot be hit by camera rays
@@ -475,7 +491,11 @@ class BDPTIntegrator(Integrator):
         """
         lights, tracer = self.scene.lights, self.scene.tracer
         lig = Subpaths(self.n_light, n)
-        e = lights.emit(rng.random(n), rng.random((n, 2)), rng.random((n, 2)))
+        if u is None:
+            e = lights.emit(rng.random(n), rng.random((n, 2)), rng.random((n, 2)))
+        else:
+            ue = u.take(np.arange(n), 5)
+            e = lights.emit(ue[:, 0], ue[:, 1:3], ue[:, 3:5])
         no_s0 = (e.kind == POINT) | (e.kind == SUN) | (e.kind == AREA)
         lig.light, lig.kind0 = e.light, e.kind
         lig.on_surface0 = (e.kind == AREA) | (e.kind == TRI)
@@ -803,12 +823,17 @@ class BDPTIntegrator(Integrator):
         return keep, c * w[:, None]
 
     def _connect_light(self, cam: Subpaths, lane: NDArray, s: NDArray, t: NDArray,
-                       rng: np.random.Generator):
-        """s = 1: next-event estimation from camera vertex t−1 with a new light sample."""
+                       rng: np.random.Generator, u_first: NDArray | None = None):
+        """s = 1: next-event estimation from camera vertex t−1 with a new light sample (at the
+        first camera vertex, t = 2, its numbers from ``u_first`` (lanes, 3) when given)."""
         lights = self.scene.lights
         m = len(lane)
         pt = cam.rows(t - 1, lane)
-        ls = lights.illuminate(pt.p, rng.random(m), rng.random((m, 2)))
+        u_sel, u_pos = rng.random(m), rng.random((m, 2))
+        if u_first is not None:
+            first = np.flatnonzero(t == 2)
+            u_sel[first], u_pos[first] = u_first[lane[first], 0], u_first[lane[first], 1:3]
+        ls = lights.illuminate(pt.p, u_sel, u_pos)
         # Light samples that carry energy, on the side the camera path arrived from
         same_side = dot(pt.wo, pt.ng) * dot(ls.wi, pt.ng) > 0
         idx = np.flatnonzero(ls.valid & (same_side | ~cam.at("reflect_only", t - 1, lane)))

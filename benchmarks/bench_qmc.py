@@ -45,6 +45,17 @@ def run(scene: str, samples: int, seed: int, quasi: bool, w: int, h: int) -> tup
     return metrics.relmse(r.image[..., :3].astype(np.float64), ref["image"]), seconds
 
 
+def _add_row(lines: list[str], row: str) -> None:
+    print(row, flush=True)
+    lines.append(row)
+
+
+def _write(path: str, lines: list[str]) -> None:
+    with open(path, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    print("wrote", path)
+
+
 def ercuts_table(args) -> None:
     """ERCUTS at its defaults and ``--ercuts`` seconds against Cycles at the same budget."""
     import cycles_runner
@@ -78,11 +89,8 @@ def ercuts_table(args) -> None:
         row = (f"| {scene} | {' / '.join(f'{x:.3g}' for x in errs)} | {e:.3g} | {np.median(energies):.3f} "
                f"| {'/'.join(str(i) for i in its)} | {' / '.join(f'{x:.3g}' for x in cyc)} "
                f"({'/'.join(str(int(x)) for x in spp)}) | {e / c:.3g} |")
-        print(row, flush=True)
-        lines.append(row)
-    with open(out, "w") as fh:
-        fh.write("\n".join(lines) + "\n")
-    print("wrote", out)
+        _add_row(lines, row)
+    _write(out, lines)
 
 
 def main() -> None:
@@ -112,11 +120,8 @@ def main() -> None:
             t = {q: float(np.median([r[1] for r in res[q]])) for q in res}
             row = (f"| {scene} | {n} | {e[False]:.3g} | {e[True]:.3g} | {e[True] / e[False]:.2f} "
                    f"| {t[False]:.3f} | {t[True]:.3f} |")
-            print(row, flush=True)
-            lines.append(row)
-    with open(OUT, "w") as fh:
-        fh.write("\n".join(lines) + "\n")
-    print("wrote", OUT)
+            _add_row(lines, row)
+    _write(OUT, lines)
 
 
 if __name__ == "__main__":

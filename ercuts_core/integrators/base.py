@@ -24,13 +24,12 @@ from numpy.typing import NDArray
 from ..film import Film
 from ..memory import MemoryPlan
 from .. import qmc
-from ..qmc import PassSequence
 from ..scene import BuiltScene, Surface
 from ..settings import RenderSettings
 
 if TYPE_CHECKING:
     from ..bsdf import Bsdf
-    from ..qmc import PixelSequence
+    from ..qmc import PassSequence, PixelSequence
 
 Progress = Callable[[float, str], "bool | None"]
 Preview = Callable[[np.ndarray], None]
@@ -140,7 +139,7 @@ def run_passes(integrator: "Integrator", film: Film, clock: Clock, *, samples: i
     enough = False
     for k in range(samples):
         part = Film(window)
-        sequence = PassSequence((s.seed, *key), first + k) if qmc.ENABLED else None
+        sequence = qmc.PassSequence((s.seed, *key), first + k) if qmc.ENABLED else None
         for start in range(0, n, batch):
             rng = np.random.default_rng([s.seed, *key, first + k, start])
             integrator.render_batch(part, np.arange(start, min(n, start + batch)), rng, sequence)
@@ -174,15 +173,19 @@ class Integrator:
         """Jittered rays through window pixels ``pix`` (N,) (box filter; a lens point each
         with depth of field); the jitter and lens numbers from ``u`` (the pass's quasi-random
         numbers of ``pix``, :mod:`ercuts_core.qmc`) when given, else from ``rng``."""
-        w = self.window
-        raster = w.raster(pix).astype(np.float64)
+        return self.camera.generate_rays(*self.camera_samples(pix, rng, u))
+
+    def camera_samples(self, pix: NDArray, rng: np.random.Generator,
+                       u: "PixelSequence | None" = None) -> tuple[NDArray, NDArray | None]:
+        """(N, 2) jittered raster positions in pixels ``pix`` (N,) and (N, 2) lens uniforms
+        (None for a pinhole), from ``u`` when given, else from ``rng``."""
+        raster = self.window.raster(pix).astype(np.float64)
         if u is None:
             raster += rng.random((len(pix), 2))
-            return self.camera.generate_rays(raster, self.camera.lens_samples(rng, len(pix)))
+            return raster, self.camera.lens_samples(rng, len(pix))
         lanes = np.arange(len(pix))
         raster += u.take(lanes, 2)
-        lens = u.take(lanes, 2) if self.camera.has_lens else None
-        return self.camera.generate_rays(raster, lens)
+        return raster, (u.take(lanes, 2) if self.camera.has_lens else None)
 
     def record_first_hit(self, film: Film, pix: NDArray, keep: NDArray, surf: Surface | None,
                          bsdf: "Bsdf | None") -> None:

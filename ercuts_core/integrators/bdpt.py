@@ -466,14 +466,7 @@ class BDPTIntegrator(Integrator):
         n = len(pix)
         cam = Subpaths(self.n_cam, n)
         # As Integrator.camera_rays (same random numbers), keeping the raster positions
-        w = self.window
-        cam.raster = w.raster(pix).astype(np.float64)
-        if u is None:
-            cam.raster += rng.random((n, 2))
-            lens = self.camera.lens_samples(rng, n)
-        else:
-            cam.raster += u.take(np.arange(n), 2)
-            lens = u.take(np.arange(n), 2) if self.camera.has_lens else None
+        cam.raster, lens = self.camera_samples(pix, rng, u)
         o, d = self.camera.generate_rays(cam.raster, lens)
         cam.p[0] = o
         cam.beta[0] = 1.0

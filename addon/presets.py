@@ -40,7 +40,7 @@ _FINAL_FALLBACK = {
     "max_cut_size": 1000,
     "max_error": 0.02,
     "e1_samples": 256,
-    "shading_samples": 1,
+    "shading_samples": 0,
     "direct_samples": 64,
 }
 

@@ -299,8 +299,10 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
     )
     shading_samples: IntProperty(
         name="Shading Samples",
-        description="Shading points (camera rays) per pixel for the virtual point light gather",
-        default=_default("shading_samples", 1), min=1, soft_max=64,
+        description=("Shading points (camera rays) per pixel for the virtual point light gather: "
+                     "each pixel's first point is gathered, the others where they leave its surface "
+                     "(edges). 0 = automatic: 4 below 1280x720, 1 from there"),
+        default=_default("shading_samples", 0), min=0, soft_max=64,
     )
     e1_samples: IntProperty(
         name="Normalisation Samples",

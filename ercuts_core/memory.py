@@ -149,7 +149,7 @@ def fixed_parts(n_pixels: int, n_triangles: int, settings: RenderSettings) -> di
         "films": n_pixels * channels * (8 * films + OUTPUT_BYTES_PER_CHANNEL),
     }
     if ercuts:
-        parts["G-buffer"] = (n_pixels * s.shading_samples * (GBUFFER_POINT_BYTES + GBUFFER_FOLLOW_BYTES
+        parts["G-buffer"] = (n_pixels * s.shading_points(n_pixels) * (GBUFFER_POINT_BYTES + GBUFFER_FOLLOW_BYTES
                                                          + GBUFFER_INTERP_BYTES)
                              + n_pixels * BALANCE_PIXEL_BYTES)
         chains = _chains(n_pixels, s)

@@ -47,6 +47,11 @@ def valid_cluster_address(address: str) -> bool:
     return isinstance(address, str) and CLUSTER_ADDRESS.fullmatch(address) is not None
 
 
+#: ``shading_samples`` = 0: the shading points per pixel for renders of fewer than this many
+#: pixels (largest first); from the largest on, one (:meth:`RenderSettings.shading_points`).
+AUTO_SHADING_SAMPLES = ((800_000, 4),)
+
+
 @dataclass(frozen=True)
 class RenderSettings:
     """Core render settings.
@@ -147,7 +152,12 @@ class RenderSettings:
             mesh become VPLs on the light, gathered with the rest).
         direct_samples: samples per pixel of ERCUTS's direct light passes
             (``direct_light='NEE'``).
-        shading_samples: shading points (camera rays) per pixel for the VPL gather.
+        shading_samples: shading points (camera rays) per pixel for the VPL gather; the
+            gather visits each pixel's first point and the others where they leave its
+            surface (edges), the rest take its light (edge-adaptive anti-aliasing,
+            :mod:`~ercuts_core.integrators.ercuts.interpolation`). 0 (default) = automatic:
+            :data:`AUTO_SHADING_SAMPLES` (4 below 800 000 pixels, 1 from 1280×720 up, where
+            ``gather_spacing`` 2 already shares the gather and 4 points would need 3 GB).
         e1_samples: shading points per VPL for its intensity normalisation (P*).
         normalize_to_p: ablation: scale the VPL image so its energy equals the rough BDPT's
             P (the behaviour before issue 13; it hid the VPL normalisation's bias). Off by
@@ -199,7 +209,7 @@ class RenderSettings:
     seeding: str = "BDPT"
     direct_light: str = "NEE"
     direct_samples: int = 64
-    shading_samples: int = 1
+    shading_samples: int = 0
     e1_samples: int = 256
     normalize_to_p: bool = False
     memory_budget_mb: int = 4096
@@ -235,9 +245,11 @@ class RenderSettings:
         if self.chains_per_pixel <= 0 or self.chain_length < 1 or self.max_chains < 1 or self.min_chain_length < 1:
             raise ValueError("chains_per_pixel and max_chains must be > 0, chain_length and min_chain_length >= 1")
         if min(self.max_cut_size, self.stochastic_cut_size, self.stochastic_passes, self.stochastic_cut_sharing,
-               self.shading_samples, self.e1_samples, self.direct_samples) < 1:
+               self.e1_samples, self.direct_samples) < 1:
             raise ValueError("max_cut_size, stochastic_cut_size, stochastic_passes, stochastic_cut_sharing, "
-                             "shading_samples, e1_samples and direct_samples must be >= 1")
+                             "e1_samples and direct_samples must be >= 1")
+        if self.shading_samples < 0:
+            raise ValueError(f"shading_samples must be >= 0 (0 = automatic), got {self.shading_samples}")
         if self.gather_spacing < 0:
             raise ValueError(f"gather_spacing must be >= 0 (0 = automatic), got {self.gather_spacing}")
         if self.clamp < 0:
@@ -265,6 +277,16 @@ class RenderSettings:
         """ERCUTS chains and VPLs also carry direct light (``direct_light='VPL'``, the paper);
         the target class of :func:`~ercuts_core.integrators.ercuts.paths.is_target`."""
         return self.direct_light == "VPL"
+
+    def shading_points(self, n_pixels: int) -> int:
+        """Shading points per pixel of an ``n_pixels`` render: ``shading_samples``, or for 0
+        the automatic choice (:data:`AUTO_SHADING_SAMPLES`)."""
+        if self.shading_samples:
+            return self.shading_samples
+        for pixels, S in AUTO_SHADING_SAMPLES:
+            if n_pixels < pixels:
+                return S
+        return 1
 
     def chain_plan(self, n_pixels: int) -> tuple[float, int]:
         """(C, N): the ER chains per iteration and their length for ``n_pixels`` pixels.

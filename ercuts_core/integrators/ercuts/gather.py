@@ -120,7 +120,7 @@ class Gather:
         progress and Esc); (Q,) bool the points to gather."""
         s, window = self.settings, self.scene.camera.window
         k = s.gather_spacing or auto_spacing(window.n_pixels)
-        if k > 1 and s.gather != "BRUTE_FORCE":
+        if (k > 1 or self.g.samples > 1) and s.gather != "BRUTE_FORCE":
             self.interp = plan_interpolation(
                 self.g, self.scene, window.width, window.height, k, grid_offset(k, self.iteration),
                 keep_going=lambda: schedule.clock.poll(schedule.fraction("Lightcuts", 0.0),
@@ -198,8 +198,9 @@ class Gather:
                         complete=done_pt.reshape(-1, S).all(axis=1), through_energy=through)
 
     def _compensation(self, sweep: "_Sweep", gmax: float, schedule: Schedule, stats: dict) -> NDArray | None:
-        """(Q, 3) the clamp's bias compensation at every valid shading point
-        (:mod:`.bias_compensation`), or None when the render does not compensate
+        """(Q, 3) the clamp's bias compensation at every gathered shading point (the
+        interpolated ones take their anchors', :mod:`.interpolation`;
+        :mod:`.bias_compensation`), or None when the render does not compensate
         (:func:`~.bias_compensation.compensates`). L_o at the surfaces found is the direct
         light by light sampling plus this gather's clamped VPL estimate there. Runs before
         the sweep so that the sweep's pacing sees the time it took; a cancel stops it between
@@ -207,7 +208,7 @@ class Gather:
         s, g, scene = self.settings, self.g, self.scene
         if not compensates(s, gmax):
             return None
-        pts = np.flatnonzero(g.valid)
+        pts = np.sort(sweep.pts_all)
         out = np.zeros((len(g.pixel), 3))
         near, t0 = 0, time.perf_counter()
         m = compensation_rays(len(pts))
@@ -231,6 +232,8 @@ class Gather:
             if not schedule.clock.poll(schedule.fraction("Lightcuts", 0.0),
                                        f"Lightcuts: clamp compensation {100 * f:.0f}%"):
                 break
+        if self.interp is not None:     # the interpolated points: from their anchors
+            self.interp.fill(out[None], np.ones(len(out), bool))
         stats["compensated_points"] = near / max(len(pts), 1)
         stats["compensation_rays"] = m
         stats["compensated_energy"] = float(luminance(out.sum(axis=0))) / g.samples
@@ -294,9 +297,12 @@ class Gather:
         pts = sweep.pts_all[:k]
         pix = self.g.pixel[pts]
         n_pixels = len(self.g.pixel) // S
-        # per pixel and pass the S points' mean: a point's variance / S
-        a, b = (luminance(x[:, pts].sum(axis=0)) / np.sqrt(S) for x in (L, L2))
-        spread.probe(pix, a, b, n_pts / S / n_pixels)
+        # per pixel and pass the S points' mean: a point's variance / S; with interpolation
+        # a pixel's points take their light from one gathered anchor: its variance
+        norm = 1.0 if self.interp is not None else np.sqrt(S)
+        a, b = (luminance(x[:, pts].sum(axis=0)) / norm for x in (L, L2))
+        lit = len(np.unique(self.g.pixel[sweep.pts_all]))   # pixels with a gathered point
+        spread.probe(pix, a, b, lit / n_pixels)
         return True
 
     def _glossy(self, gathered: NDArray) -> NDArray:

@@ -235,8 +235,9 @@ class ErcutsIntegrator:
         with self._phase("seeds"):
             self._gbuffer_poll(0.0)
             window = self.scene.camera.window
-            jitter = stratified_jitter(window.n_pixels, s.shading_samples, self.base_seed, self.iteration)
-            g, _ = build_gbuffer(self.scene, s.shading_samples, rng, jitter, poll=self._gbuffer_poll)
+            S = s.shading_points(window.n_pixels)
+            jitter = stratified_jitter(window.n_pixels, S, self.base_seed, self.iteration)
+            g, _ = build_gbuffer(self.scene, S, rng, jitter, poll=self._gbuffer_poll)
             first_hits = self._first_hit_aovs(g)
             self._gbuffer_poll(1.0)       # the AOVs take ≈ 0.4 s at 1080p
             if follow:     # the gather's points: what mirrors show and windows let through (§G.3)

@@ -19,8 +19,18 @@ which keeps a texture's detail while sharing the gather between k² pixels. Its 
 bias of the size of the irradiance's curvature over k pixels (a blur of the indirect light,
 not of the texture or the direct light, which the direct-light passes render at every
 pixel); it is not part of the lightcut error bound, and the statistics report the share of
-interpolated points (``gather_interpolated``). ``gather_spacing`` = 1 turns it off; 0
-chooses k from the resolution (:func:`auto_spacing`).
+interpolated points (``gather_spacing`` = 1 turns it off; 0 chooses k from the resolution,
+:func:`auto_spacing`).
+
+With S > 1 shading points per pixel (``shading_samples``) the anchors are the *first* point
+of each grid pixel and every other point is a target, also for k = 1: a pixel's S points
+each take the light of their own pixel's first point (k = 1; their corners' first points
+for k > 1) when they lie on its surface, and are gathered themselves where they do not —
+at silhouettes, creases and contact edges. That is anti-aliasing of the gather at the cost
+of one gather per pixel plus one per edge point (edge-adaptive supersampling): over the
+iterations the anchors move through the pixel (stratified jitter), so a pixel's mean is
+the footprint average of ρ(x)·E(x) up to the correlation of ρ and E within one pixel.
+The statistics report the share of interpolated points (``gather_interpolated``).
 """
 from __future__ import annotations
 
@@ -112,11 +122,12 @@ def plan_interpolation(g: GBuffer, scene, width: int, height: int, k: int,
                        offset: tuple[int, int], keep_going=None) -> Interpolation | None:
     """The interpolated points of ``g`` (a window of ``width`` × ``height`` pixels, S points
     per pixel, entry q = pixel·S + s) on the anchor grid of spacing ``k`` shifted by
-    ``offset``; None for k ≤ 1, when no point qualifies or when ``keep_going()`` (called
+    ``offset`` (anchors: the grid pixels' points s = 0, module docstring); None for k ≤ 1
+    with S = 1, when no point qualifies or when ``keep_going()`` (called
     after every chunk of work, for progress and Esc) returns False (module docstring)."""
-    if k <= 1:
-        return None
     S = g.samples
+    if k <= 1 and S <= 1:
+        return None
     smooth = _smooth_points(g, scene, keep_going)
     if smooth is None:
         return None
@@ -125,7 +136,7 @@ def plan_interpolation(g: GBuffer, scene, width: int, height: int, k: int,
     pix = q // S
     x, y = pix % width, pix // width
     dx, dy = (x - offset[0]) % k, (y - offset[1]) % k
-    cand = np.flatnonzero(ok & ((dx != 0) | (dy != 0)))
+    cand = np.flatnonzero(ok & ((dx != 0) | (dy != 0) | (q % S != 0)))
     if len(cand) == 0:
         return None
     x0, y0 = x[cand] - dx[cand], y[cand] - dy[cand]
@@ -136,8 +147,7 @@ def plan_interpolation(g: GBuffer, scene, width: int, height: int, k: int,
                                      (0, k, (1 - fx) * fy), (k, k, fx * fy))):
         cx, cy = x0 + ox, y0 + oy
         inside = (cx >= 0) & (cx < width) & (cy >= 0) & (cy < height) & (w > 0)
-        a = np.where(inside, (np.clip(cy, 0, height - 1) * width + np.clip(cx, 0, width - 1)) * S
-                     + q[cand] % S, cand)
+        a = np.where(inside, (np.clip(cy, 0, height - 1) * width + np.clip(cx, 0, width - 1)) * S, cand)
         use = inside & ok[a] & _alike(g, rho, cand, a)
         anchor[:, c] = np.where(use, a, cand)
         weight[:, c] = np.where(use, w, 0.0)

@@ -213,7 +213,8 @@ def test_spacing_and_grid_offsets() -> None:
 
 
 def test_interpolated_gather_in_a_render_agrees_with_the_full_gather() -> None:
-    """``gather_spacing = 2`` through ``render`` on the Cornell box: about three quarters
+    """``gather_spacing = 2`` through ``render`` on the Cornell box (one shading point per
+    pixel): about three quarters
     of the points are interpolated away from its edges, and the indirect light per pixel
     differs from the full gather's (same seed: same VPLs) by noise and a small blur only —
     the mean over the pixels within 4.5 standard errors of the difference, plus 1 %."""
@@ -221,7 +222,8 @@ def test_interpolated_gather_in_a_render_agrees_with_the_full_gather() -> None:
     desc = scenes.cornell_box(64, 48)
     out = {}
     for k in (1, 2):
-        res = render(desc, RenderSettings(gather_spacing=k, seed=3, samples=4, direct_samples=4))
+        res = render(desc, RenderSettings(gather_spacing=k, shading_samples=1, seed=3, samples=4,
+                                          direct_samples=4))
         out[k] = (luminance(res.aovs["indirect"].reshape(-1, 3)), res.stats)
     assert 0.5 < out[2][1]["gather_interpolated"] <= 0.75 and out[1][1]["gather_interpolated"] == 0
     d = out[2][0] - out[1][0]

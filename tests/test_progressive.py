@@ -127,7 +127,9 @@ def test_cancel_during_lightcuts_mixes_gathered_and_rough_pixels():
     """A cancel inside the first gather batch (256 points) finishes that batch with coarser
     cuts; those pixels come from the gather, the rest from the rough BDPT image."""
     settings = RenderSettings(**FAST, seed=2)
-    cancelled = render(closed_room(48, 36), settings, Recorder(cancel_phase="Lightcuts"))
+    # cancelled at the first report after the interpolation's planning (a cancel there
+    # gathers nothing: test_stopped_by), while the clamp compensation runs before the sweep
+    cancelled = render(closed_room(48, 36), settings, Recorder(cancel_phase="Lightcuts: clamp compensation"))
     assert cancelled.stats.get("gather_incomplete") == 1
     cut = cancelled.aovs["cut_size"][..., 0].ravel()
     gathered = cut > 0

@@ -120,7 +120,9 @@ class Gather:
         progress and Esc); (Q,) bool the points to gather."""
         s, window = self.settings, self.scene.camera.window
         k = s.gather_spacing or auto_spacing(window.n_pixels)
-        if (k > 1 or self.g.samples > 1) and s.gather != "BRUTE_FORCE":
+        if s.gather == "BRUTE_FORCE":       # the exact ablation: no spacing; a pixel's further
+            k = 1                           # points still take its first point's light
+        if k > 1 or self.g.samples > 1:
             self.interp = plan_interpolation(
                 self.g, self.scene, window.width, window.height, k, grid_offset(k, self.iteration),
                 keep_going=lambda: schedule.clock.poll(schedule.fraction("Lightcuts", 0.0),
@@ -169,6 +171,8 @@ class Gather:
         if not warm_up.wait(lambda: clock.poll(schedule.fraction("Lightcuts", 0.0),
                                                "Lightcuts: compiling the kernels (first render only)")):
             stats["gather_incomplete"] = 1          # cancelled while the kernels compiled
+        if clock.cancelled:
+            stats["gather_incomplete"] = 1          # cancelled while planning or compiling
         if len(vpls) == 0 or clock.cancelled:
             pts_all = pts_all[:0]
         sweep = _Sweep(self, vpls, tree, gmax, schedule, stats, pts_all)

@@ -1,7 +1,7 @@
 """Room corners: the built-in Cornell box's walls share their edges with the floor and the
 ceiling, and its camera looks straight down the box, so the pixel centres of a 1-pixel
-diagonal staircase project exactly onto the corner edges. ERCUTS gathers VPL light at one
-camera ray per pixel centre (``shading_samples`` = 1); those points must see the room
+diagonal staircase project exactly onto the corner edges. ERCUTS gathers VPL light at
+jittered camera rays in every pixel (``shading_samples``); those points must see the room
 (the tracer's offsets, :mod:`ercuts_core.tracer`; ``tests/test_tracer.py`` has the
 geometric test)."""
 from __future__ import annotations

@@ -97,7 +97,8 @@ def test_allocated_e1_matches_the_pixel_sum(box, e1_true):
 
 
 def test_gather_energy_of_one_point_per_pixel_is_unbiased(box, e1_true):
-    """With one shading point per pixel (the default ``shading_samples``), the VPL image the
+    """With one shading point per pixel (``shading_samples`` = 1; every jittered point is an
+    unbiased sample of its pixel, so this holds for each of S points too), the VPL image the
     gather produces has the pixel sum's energy in expectation — what Ê1 and the rough BDPT's P
     measure (mean of 128 independent G-buffers). A point at the pixel centre does not: here
     it gives the floor VPL −7 %, the back-wall one −19 %, the crease one −63 % and the lamp-top

@@ -47,9 +47,13 @@ def valid_cluster_address(address: str) -> bool:
     return isinstance(address, str) and CLUSTER_ADDRESS.fullmatch(address) is not None
 
 
+#: Renders of at least this many pixels (1280×720 and up) count as high resolution for the
+#: automatic settings: the gather's spacing 2 (``gather_spacing`` = 0) and one shading point
+#: per pixel (``shading_samples`` = 0); below it, every point gathered and four per pixel.
+HIGH_RESOLUTION_PIXELS = 800_000
 #: ``shading_samples`` = 0: the shading points per pixel for renders of fewer than this many
 #: pixels (largest first); from the largest on, one (:meth:`RenderSettings.shading_points`).
-AUTO_SHADING_SAMPLES = ((800_000, 4),)
+AUTO_SHADING_SAMPLES = ((HIGH_RESOLUTION_PIXELS, 4),)
 
 
 @dataclass(frozen=True)

@@ -168,9 +168,8 @@ class Gather:
         def preview(point_parts, done):     # the interpolated points filled only when shown
             show(lambda: self._filled(point_parts, done, copy=True))
         clock = schedule.clock
-        if not warm_up.wait(lambda: clock.poll(schedule.fraction("Lightcuts", 0.0),
-                                               "Lightcuts: compiling the kernels (first render only)")):
-            stats["gather_incomplete"] = 1          # cancelled while the kernels compiled
+        warm_up.wait(lambda: clock.poll(schedule.fraction("Lightcuts", 0.0),
+                                        "Lightcuts: compiling the kernels (first render only)"))
         if clock.cancelled:
             stats["gather_incomplete"] = 1          # cancelled while planning or compiling
         if len(vpls) == 0 or clock.cancelled:

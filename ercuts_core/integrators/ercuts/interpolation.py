@@ -39,11 +39,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ...settings import HIGH_RESOLUTION_PIXELS
 from .vpl import GBuffer
 
 #: ``gather_spacing`` = 0: the spacing k for renders of at least this many pixels (largest
 #: first); below the smallest, every point is gathered (k = 1).
-AUTO_SPACING = ((800_000, 2),)
+AUTO_SPACING = ((HIGH_RESOLUTION_PIXELS, 2),)
 #: Two points lie on one smooth surface (:func:`same_surface`; also the gather's cut
 #: sharing) when they share the material, their shading normals are within this cosine …
 SIMILAR_COS = 0.95

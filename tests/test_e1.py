@@ -118,7 +118,7 @@ def test_few_samples_leave_no_vpl_many_times_too_bright(box, e1_true, monkeypatc
     1/Ê1 that scales a VPL has a heavy tail: a second stage that found one small value makes
     the VPL E1/Ê1 times too bright (Veach's room, eight iterations in 30 s: one VPL 172 000×,
     the image 6.9× its energy). The shaky estimates (:data:`~ercuts_core.integrators.ercuts.
-    vpl.SHAKY_RELATIVE_VARIANCE`) get pooled extra samples: over 300 estimates of the five
+    vpl.SHAKY_RELATIVE_VARIANCE`) are drawn again with fresh samples: over 300 estimates of the five
     VPLs whose light reaches the camera directly, none is more than 6× too bright, and the
     same estimates without the pooling are (8.2× and 12.7× measured), so this can fail."""
     from ercuts_core.integrators.ercuts import vpl

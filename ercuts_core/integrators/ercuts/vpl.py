@@ -372,18 +372,18 @@ SHAKY_BUDGET = 0.25
 
 
 def _redraw_shaky(scene: BuiltScene, pos: NDArray, normal: NDArray, color: NDArray, gmax: float,
-                counts: NDArray, e1: NDArray, e1_sq: NDArray, c: NDArray, extra: tuple[int, int, float],
-                rng: np.random.Generator, chunk: int, keep_going, clear_receivers: bool) -> None:
+                  counts: NDArray, e1: NDArray, e1_sq: NDArray, extra: tuple[int, int, float],
+                  rng: np.random.Generator, chunk: int, keep_going, clear_receivers: bool) -> None:
     """Re-estimate the shaky VPLs' Ê1 (:data:`SHAKY_RELATIVE_VARIANCE`) with m fresh samples
     each, in place: ``extra`` = (least, most, total), m = total / (number of shaky VPLs)
     clipped to [least, most].
 
     ``e1``, ``e1_sq`` (V,): the second stage's means of the samples and of their squares over
-    ``counts`` (V,) samples; ``c`` (V,): the pilot's relative variance, left as it is. A shaky
-    VPL's Ê1 becomes the mean of the m fresh samples alone and its count m: the choice of the
-    shaky VPLs depends on the second stage, so its samples are biased given that choice (few
-    hits: Ê1 low), while the fresh ones are not, and the pilot's ĉ_v, independent of both,
-    keeps the Jensen correction first-order unbiased. The earlier scheme pooled the second
+    ``counts`` (V,) samples. A shaky VPL's Ê1 becomes the mean of the m fresh samples alone
+    and its count m: the choice of the shaky VPLs depends on the second stage, so its samples
+    are biased given that choice (few hits: Ê1 low), while the fresh ones are not, and the
+    pilot's ĉ_v (untouched here), independent of both, keeps the Jensen correction
+    first-order unbiased. The earlier scheme pooled the second
     stage with the fresh samples and corrected with the second stage's ĉ_v, which is large
     exactly when that stage's Ê1 is small: it over-corrected, ``vpl_energy_ratio`` of the
     glass-sphere scene (issue 15) 0.974 ± 0.004 over 8 seeds; with this 0.991 ± 0.004
@@ -475,8 +475,8 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
     e1, e1_sq = estimate_e1_light_tracing(scene, pos, normal, color, gmax, counts, rng, chunk,
                                           stage(f1, 0.9), moments=True, clear_receivers=clear_receivers)
     if not stop[0]:
-        _redraw_shaky(scene, pos, normal, color, gmax, counts, e1, e1_sq, c,
-                    (n_samples, hi, SHAKY_BUDGET * budget), rng, chunk, stage(0.9, 1.0), clear_receivers)
+        _redraw_shaky(scene, pos, normal, color, gmax, counts, e1, e1_sq,
+                      (n_samples, hi, SHAKY_BUDGET * budget), rng, chunk, stage(0.9, 1.0), clear_receivers)
     if JENSEN_CORRECTION:
         # E[1/Ê1] ≈ (1/E1)(1 + c_v/N_v) (delta method); the pilot's ĉ_v is independent of
         # the second stage, so (1/Ê1)(1 − ĉ_v/N_v) is unbiased to second order.

@@ -48,6 +48,16 @@ class Film:
             passes are not reported).
         passes_done: complete passes (samples per pixel) accumulated.
         nonfinite: number of dropped non-finite samples.
+        pooled: (3, h·w, 3) float64 or None: sums of the *pooled* part of the image, by path
+            class — ERCUTS's direct-light passes, whose every pass is an independent estimate
+            of the same light: each iteration adds the sum of its ``pooled_passes`` passes
+            (:meth:`set_pixels`), and the image holds their mean over all passes of all
+            iterations (:meth:`light_parts`), not the mean of the iterations' means. An
+            iteration's own passes vary with the time it had (Ercuts, directly lit scene at
+            60 s: 64 and 258), and the mean of means has the variance σ²(1/64 + 1/258)/4 =
+            σ²/205 where the pooled mean has σ²/322 (the minimum-variance combination of
+            unbiased estimates weights each by its inverse variance, here its pass count).
+        pooled_passes: passes summed in :attr:`pooled` (0: nothing pooled).
     """
 
     def __init__(self, window: Window):
@@ -61,6 +71,8 @@ class Film:
         self.aov_sum: dict[str, NDArray] = {}
         self.passes_done = 0
         self.nonfinite = 0
+        self.pooled: NDArray | None = None
+        self.pooled_passes = 0
 
     def _finite(self, L: NDArray, parts: NDArray | None = None) -> tuple[NDArray, NDArray | None]:
         """Zero (and count) samples whose value or any path-class part is not finite."""
@@ -124,14 +136,19 @@ class Film:
             # One bincount over (class, pixel) cells: class c of pixel p is cell c·n + p.
             self._add(self.color_parts.reshape(-1, 3), cls * w.n_pixels + pix, L / w.n_pixels)
 
-    def set_pixels(self, parts: NDArray, alpha: NDArray) -> None:
+    def set_pixels(self, parts: NDArray, alpha: NDArray, pooled: NDArray | None = None,
+                   pooled_passes: int = 0) -> None:
         """Replace the film by one finished pass: ``parts`` (3, h·w, 3) per-pixel radiance by
-        path class, ``alpha`` (h·w,) coverage (integrators that do not accumulate samples)."""
+        path class, ``alpha`` (h·w,) coverage (integrators that do not accumulate samples);
+        ``pooled`` (3, h·w, 3): the sum of ``pooled_passes`` > 0 passes of an estimate whose
+        passes are pooled over the iterations (:attr:`pooled`), the image being ``parts``
+        plus their mean."""
         self.color_parts[:] = parts
         self.color[:] = parts.sum(axis=0)
         self.splat[:] = 0.0
         self.alpha[:] = alpha
         self.passes_done = 1
+        self.pooled, self.pooled_passes = (None, 0) if not pooled_passes else (pooled, int(pooled_passes))
 
     def add_aov(self, name: str, pix: NDArray, values: NDArray) -> None:
         """Accumulate a first-hit AOV (N, C) (averaged over passes in :meth:`aovs`)."""
@@ -151,6 +168,9 @@ class Film:
             self.aov_sum[k] = self.aov_sum.get(k, 0) + v
         self.nonfinite += other.nonfinite
         self.passes_done += max(other.passes_done, 1)
+        if other.pooled_passes:
+            self.pooled = other.pooled.copy() if self.pooled is None else self.pooled + other.pooled
+            self.pooled_passes += other.pooled_passes
 
     def image(self) -> NDArray[np.float32]:
         """(h, w, 4) float32 linear RGBA, top row first: mean camera estimate + splats."""
@@ -158,6 +178,8 @@ class Film:
         spp = max(self.passes_done, 1)
         # One light subpath per camera sample: spp·n_pixels light paths in all.
         rgb = self.color / spp + self.splat / (spp * w.n_pixels)
+        if self.pooled_passes:
+            rgb = rgb + self.pooled.sum(axis=0) / self.pooled_passes
         a = self.alpha / spp
         out = np.concatenate([rgb, a[:, None]], axis=1).reshape(w.height, w.width, 4)
         return out.astype(np.float32)
@@ -178,5 +200,8 @@ class Film:
 
     def light_parts(self) -> NDArray:
         """(3, h·w, 3) float64 mean radiance per light pass (:data:`LIGHT_PASSES`), normalised
-        like :meth:`image`."""
-        return self.color_parts / max(self.passes_done, 1)
+        like :meth:`image` (the pooled part included)."""
+        parts = self.color_parts / max(self.passes_done, 1)
+        if self.pooled_passes:
+            parts = parts + self.pooled / self.pooled_passes
+        return parts

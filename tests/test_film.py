@@ -59,3 +59,28 @@ def test_splats_land_at_their_raster_positions():
     for c in range(3):
         m = cls[:-1] == c
         np.testing.assert_allclose(film.color_parts[c], _reference(n, pix[m], L[:-1][m]) / n, rtol=1e-12)
+
+
+def test_pooled_passes_are_averaged_over_all_passes_not_per_iteration():
+    """Two iterations' films: their own parts are averaged per iteration, their pooled parts
+    (ERCUTS's direct passes) over the passes of both — a 64-pass and a 258-pass iteration
+    weigh 64:258, not 1:1 — and the light passes sum to the image."""
+    rng = np.random.default_rng(3)
+    w = Window(0, 0, 4, 3)
+    films, own, mean = [], [], []
+    for n in (64, 258):
+        parts = rng.random((3, w.n_pixels, 3))
+        direct = rng.random((3, w.n_pixels, 3))          # the iteration's mean of n passes
+        f = Film(w)
+        f.set_pixels(parts, np.ones(w.n_pixels), direct * n, n)
+        films.append(f), own.append(parts), mean.append(direct)
+    film = films[0]
+    film.merge(films[1])
+    want = (own[0] + own[1]) / 2 + (64 * mean[0] + 258 * mean[1]) / 322
+    np.testing.assert_allclose(film.light_parts(), want, rtol=1e-12)
+    rgb = film.image()[..., :3].reshape(-1, 3)
+    np.testing.assert_allclose(rgb, want.sum(axis=0), rtol=1e-6)
+    assert film.pooled_passes == 322 and film.passes_done == 2
+    empty = Film(w)                     # no pooled passes: the plain mean of the iterations
+    empty.set_pixels(own[0], np.ones(w.n_pixels), mean[0] * 0, 0)
+    assert empty.pooled is None and empty.pooled_passes == 0

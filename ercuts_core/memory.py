@@ -29,11 +29,18 @@ MIB = 1 << 20
 FILM_CHANNELS = 7 + 16
 #: ERCUTS-only AOVs: cut_size 1, chain_deposits 1, vpl_density 1, er_caustic 3.
 ERCUTS_AOV_CHANNELS = 6
+#: ERCUTS's direct-light passes pooled over the iterations (``direct_light='NEE'``):
+#: :attr:`Film.pooled <ercuts_core.film.Film.pooled>`, 3 light passes × RGB.
+POOLED_CHANNELS = 9
 #: Output per channel: the float32 result.
 OUTPUT_BYTES_PER_CHANNEL = 4
 #: Bytes per triangle: description (float32 positions, int32 indices, ids), the built
 #: scene's float64 copies and normals, and embree's BVH.
 TRIANGLE_BYTES = 400
+#: The Sobol sequence's tables (:mod:`ercuts_core.qmc`): scipy's initialisation peaks at 6.0 MiB
+#: and keeps 1.95 MiB (direction numbers and the first block of points; measured with
+#: tracemalloc in a fresh process), once per process — the first render's peak.
+SOBOL_BYTES = int(6.5 * MIB)
 #: PATH ray state per camera sample of a batch (rays, hits, BSDF, light samples).
 PATH_LANE_BYTES = 1600
 #: BDPT state per camera sample and path vertex (two subpaths, MIS pdfs, connection rows).
@@ -140,12 +147,14 @@ def fixed_parts(n_pixels: int, n_triangles: int, settings: RenderSettings) -> di
     """Bytes alive for the whole render: scene, films and (ERCUTS) window-sized arrays."""
     s = settings
     ercuts = s.integrator == "ERCUTS"
-    channels = FILM_CHANNELS + (ERCUTS_AOV_CHANNELS if ercuts else 0)
+    channels = FILM_CHANNELS + (ERCUTS_AOV_CHANNELS if ercuts else 0) \
+        + (POOLED_CHANNELS if ercuts and not s.direct_vpls else 0)
     # Films alive at once: the result and one pass (ERCUTS: the rough BDPT image and its
     # pass; the final film's accumulators are filled at the end, when the pass is gone).
     films = 2
     parts = {
         "scene": n_triangles * TRIANGLE_BYTES,
+        "Sobol tables": SOBOL_BYTES,
         "films": n_pixels * channels * (8 * films + OUTPUT_BYTES_PER_CHANNEL),
     }
     if ercuts:

@@ -13,7 +13,7 @@ Phases (each a module named after the paper's step):
 Direct light (``direct_light``). With 'NEE' (the default) the light that reaches the
 camera directly or after one scattering — emitters and world seen directly, and direct
 light from every light — is rendered in its own phase after the rough image, ``direct_samples``
-jittered (anti-aliased) passes of next-event estimation with MIS (:meth:`_direct_passes`);
+jittered (anti-aliased) passes of next-event estimation with MIS (:meth:`_direct_light`);
 the chains are restricted to indirect paths (x2 scatters, k ≥ 3), P is the rough image's
 indirect energy, and the VPLs carry indirect light only. VPLs standing for area lights
 (the paper's and Lightcuts' representation, kept as 'VPL') make soft shadows blotchy and,
@@ -280,15 +280,13 @@ class ErcutsIntegrator:
             stats["direct_samples_for_spare_time"] = self.direct_rival.extra
         scale = self._energy_scale(gathered, vpls, P)
         light = self._compose(base, gathered.parts, vpls, scale)
-        if not gathered.complete.all():     # cancelled: the rough image where not gathered
+        complete = gathered.complete.all()
+        if not complete:                    # cancelled: the rough image where not gathered
             missing = np.flatnonzero(~gathered.complete)
             light[:, missing] = rough.full_parts(missing)[0]
-            film.set_pixels(light, alpha)
-        elif not s.direct_vpls:             # the direct passes pooled over the iterations
-            n = self.direct_passes
-            film.set_pixels(light - base, alpha, base * n, n)
-        else:
-            film.set_pixels(light, alpha)
+        # the direct passes (the mean of stats['direct_samples'] passes) pooled over the iterations
+        n = stats["direct_samples"] if complete and not s.direct_vpls else 0
+        film.set_pixels(light - base if n else light, alpha, base * n, n)
         self._finish(film, first_hits, chains, vpls, gathered, scale)
 
     def _gbuffer_poll(self, f: float) -> None:
@@ -364,7 +362,7 @@ class ErcutsIntegrator:
         t0 = time.perf_counter()
         direct = self._passes(path, "Direct light", (0xD1,), "direct", show=False,
                               samples=self.settings.direct_samples, on_pass=on_pass)
-        self.stats["direct_samples"] = self.direct_passes = n_done = direct.passes_done
+        self.stats["direct_samples"] = n_done = direct.passes_done
         base, alpha = direct.light_parts(), direct.alpha / max(n_done, 1)
         seconds = (time.perf_counter() - t0) / max(n_done, 1)
         del direct                                       # (its AOVs are not needed: 1080p memory)
@@ -384,7 +382,6 @@ class ErcutsIntegrator:
             base[:] = base * (1.0 - w) + part.light_parts() * w
             alpha[:] = alpha * (1.0 - w) + part.alpha * w
             n_done += 1
-            self.direct_passes = n_done
             return True
 
         self.direct_rival = DirectRival(one_more, variance, seconds)

@@ -690,7 +690,11 @@ class LightSet:
         that are not scene geometry — area lights (front side, spread included), point and
         spot lights with a radius (:mod:`.sphere_lights`: the sphere, or the disk facing
         ``o``) and suns with an angle (their cone, only for rays with ``t_max`` = inf) —
-        nearer than ``t_max`` (N,) [m]; unoccluded up to t_max by construction.
+        nearer than ``t_max`` (N,) [m]; unoccluded up to t_max by construction. Lights are
+        transparent to the rays that meet them, as in Cycles (``integrator_shade_light``
+        continues the path past a light it hit, a transparent bounce): the radiance of every
+        light shape the ray crosses before ``t_max`` adds up — two overlapping soft lights seen
+        in a mirror show their sum where they overlap, not the nearer one's radiance.
 
         Next-event estimation is the only other way to reach these lights, and it cannot
         follow a delta lobe: the integrators add this after a mirror or glass event (the
@@ -698,26 +702,24 @@ class LightSet:
         hit as geometry/misses and are not included."""
         n = len(o)
         out = np.zeros((n, 3))
-        t_best = np.asarray(t_max, np.float64).copy()
+        t_max = np.asarray(t_max, np.float64)
         for i in range(len(self.ar_c)):                    # few lights: a loop over lights
             t, ab = self._area_hit(i, o, d)
             inside = np.where(self.ar_ellipse[i], (ab ** 2).sum(axis=1) <= 1.0,
                               (np.abs(ab) <= 1.0).all(axis=1))
-            hit = inside & (t > 0) & (t < t_best)
+            hit = inside & (t > 0) & (t < t_max)
             if hit.any():
-                out[hit] = self.area_radiance(np.full(int(hit.sum()), i), -d[hit])
-                t_best[hit] = t[hit]
+                out[hit] += self.area_radiance(np.full(int(hit.sum()), i), -d[hit])
         for j in np.flatnonzero(self.pt_soft):
             t = self._soft_point_hit(j, o, d)
-            hit = (t > 0) & (t < t_best)
+            hit = (t > 0) & (t < t_max)
             if hit.any():
                 r = self.pt_radius[j]
                 spot = self.spot_factor(np.full(int(hit.sum()), j), -d[hit])
-                out[hit] = self.pt_I[j] * (spot / (np.pi * r * r))[:, None]
-                t_best[hit] = t[hit]
+                out[hit] += self.pt_I[j] * (spot / (np.pi * r * r))[:, None]
         for j in np.flatnonzero(self.sun_cone):
             cos = d @ self.sun_dir[j]                      # −d · (toward the sun = −sun_dir)
-            hit = ~np.isfinite(t_best) & (1.0 - cos <= self.sun_omc[j])
+            hit = ~np.isfinite(t_max) & (1.0 - cos <= self.sun_omc[j])
             out[hit] += self.sun_L[j]
         return out
 

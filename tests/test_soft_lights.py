@@ -125,6 +125,25 @@ def test_sphere_light_from_inside_sees_radiance_everywhere():
     assert (s.pdf_dir == 0).all()                                # light tracing cannot reach it
 
 
+@pytest.mark.parametrize("sphere", [True, False])
+def test_lights_a_ray_crosses_add_up_as_cycles_lights_are_transparent(sphere):
+    """A ray after a mirror (:meth:`LightSet.radiance_along`) that crosses two soft lights sees
+    the sum of their radiances, as Cycles renders it (its path continues past a light it hit);
+    the nearer light's alone made the glossy sweep's mirror 2–4 % too dark where the two
+    largest lights overlap. A surface before the lights (``t_max``) hides both."""
+    small, big = np.array([0.0, 1.0, 0.0]), np.array([0.0, 1.0, -1.0])
+    I = np.array([[2.0, 1.0, 0.5], [0.5, 1.0, 3.0]])
+    ls = lightset(points=PointLights([small, big], I, [[0, -1, 0]] * 2, [-1, -1], [0, 0], [0.2, 0.4],
+                                     [1, 1], [sphere, sphere]))
+    o = np.array([[0.0, 1.0, 3.0]] * 4)
+    d = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, -1.0], [0.3, 0.0, -4.0], [0.0, 0.0, -1.0]])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t_max = np.array([np.inf, 10.0, np.inf, 2.0])       # the last ray meets a surface first
+    L = I / (np.pi * np.array([[0.2 ** 2], [0.4 ** 2]]))
+    expect = np.array([L[0] + L[1], L[0] + L[1], L[1], [0.0, 0.0, 0.0]])
+    np.testing.assert_allclose(ls.radiance_along(o, d, t_max), expect, rtol=1e-5)
+
+
 def test_sun_angle_samples_its_cone_uniformly():
     half = np.radians(6.0)
     d = np.array([0.3, -1.0, 0.2]) / np.linalg.norm([0.3, -1.0, 0.2])

@@ -20,6 +20,7 @@ from .lights import LightCollector
 from .images import TextureCollector
 from .materials import MaterialCollector
 from .mesh import GEOMETRY_TYPES, read_mesh, transform_mesh
+from .visibility import ray_visibility_note
 from .world import world_background
 
 __all__ = ["ExportCancelled", "ExportError", "ExportResult", "export_scene", "render_size"]
@@ -84,6 +85,16 @@ def _optional_fields(cls, **values) -> dict:
     return {k: v for k, v in values.items() if v is not None and k in known}
 
 
+def _note_visibility(ob, noted: set[str], warnings: list[str]) -> None:
+    """Append ``ob``'s :func:`.visibility.ray_visibility_note` to ``warnings`` once per object."""
+    if ob.name in noted:
+        return
+    noted.add(ob.name)
+    note = ray_visibility_note(ob)
+    if note is not None:
+        warnings.append(note)
+
+
 def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
                  require_camera=True, should_stop=None, texture_cache=None) -> ExportResult:
     """Export the evaluated scene of ``depsgraph`` (its view layer) for the core.
@@ -138,6 +149,7 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
     parts = dict(positions=[], triangles=[], normals=[], smooth=[], material_ids=[], object_ids=[],
                  uvs=[], tangents=[])
     mesh_warnings: list[str] = []
+    noted: set[str] = set()                  # objects whose ray-visibility note is given
     n_vertices = 0
     n_instances = 0
     skipped = dict(empty_meshes=0, degenerate_transforms=0)   # silent, counted (policy §2.6)
@@ -148,12 +160,14 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         if ob.original.hide_render:
             continue
         if ob.type == "LIGHT":
+            _note_visibility(ob, noted, mesh_warnings)
             names.append(_instance_name(inst))
             lights.add(ob.data, _relative(inst.matrix_world, origin), len(names) - 1, ob.name,
                        visible_camera=bool(getattr(ob, "visible_camera", False)))
             continue
         if ob.type not in GEOMETRY_TYPES or not inst.show_self:
             continue
+        _note_visibility(ob, noted, mesh_warnings)
         # UVs and tangents only for objects whose materials read them (they cost memory).
         slot_rows = materials.slot_table(ob, _relative(inst.matrix_world, origin), origin)
         used_rows = [materials.rows[r] for r in np.unique(slot_rows)]

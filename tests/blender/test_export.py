@@ -535,3 +535,24 @@ def test_lights_shown_to_the_camera_warn():
     assert _lights().warnings == []
     ob.visible_camera = True
     assert any("visible to the camera" in w for w in h.export().warnings)
+
+
+def test_ray_visibility_that_ercuts_ignores_warns_naming_the_object():
+    """Cycles hides objects from single ray types, makes holdouts and shadow catchers, and
+    switches lights' shadows off; Ercuts renders all of them as visible to every ray and says
+    so once per object (bad-input policy: a warning with the fallback, not a silent
+    difference). Defaults give no warning."""
+    h.camera()
+    cube = h.box("Cube", location=(0, 0, 0))
+    lamp = h.light("POINT", name="Lamp", energy=10.0)
+    assert h.export().warnings == []
+    cube.visible_shadow = False
+    cube.visible_glossy = False
+    cube.is_holdout = True
+    lamp.visible_diffuse = False
+    lamp.data.use_shadow = False
+    warnings = h.export().warnings
+    obj = [w for w in warnings if w.startswith("Object 'Cube'")]
+    light = [w for w in warnings if w.startswith("Light 'Lamp'")]
+    assert len(obj) == 1 and "glossy, shadow rays" in obj[0] and "holdout" in obj[0]
+    assert len(light) == 1 and "diffuse rays" in light[0] and "Cast Shadow off" in light[0]

@@ -9,8 +9,8 @@ import pytest
 
 from benchmarks.metrics import relmse
 from ercuts_core import RenderSettings, render
-from ercuts_core.integrators.ercuts.progressive import (CLAMP_ALPHA, iteration_clamp, iteration_seed,
-                                                        iteration_settings, iteration_target)
+from ercuts_core.integrators.ercuts.progressive import (CLAMP_ALPHA, iteration_clamp, iteration_e1_samples,
+                                                        iteration_seed, iteration_settings, iteration_target)
 from ercuts_core.scenes import closed_room
 
 FAST = dict(integrator="ERCUTS", rough_samples=4, chain_length=20, chains_per_pixel=0.5, direct_samples=8)
@@ -28,6 +28,12 @@ def test_iteration_seeds_and_clamps():
     s = RenderSettings(seed=7)
     assert iteration_settings(s, 0) is s
     assert iteration_settings(s, 2).seed == iteration_seed(7, 2)
+    # Ê1's samples grow as (k+1)^½: the mean of the iterations' 1/N_k (the order of 1/Ê1's
+    # residual bias) falls as 2/(N·√K) → 0
+    assert iteration_settings(s, 3).e1_samples == iteration_e1_samples(s.e1_samples, 3) == 2 * s.e1_samples
+    K = 10_000
+    mean_inverse = np.mean([1.0 / iteration_e1_samples(256, k) for k in range(K)])
+    assert mean_inverse == pytest.approx(2.0 / (256 * np.sqrt(K)), rel=0.02)
     assert (iteration_target(3, False), iteration_target(0, True), iteration_target(0, False)) == (3, None, 1)
     with pytest.raises(ValueError, match="iterations"):
         RenderSettings(iterations=-1)

@@ -20,7 +20,7 @@ from .lights import LightCollector
 from .images import TextureCollector
 from .materials import MaterialCollector
 from .mesh import GEOMETRY_TYPES, read_mesh, transform_mesh
-from .visibility import ray_visibility_note
+from .visibility import ray_visibility_notes
 from .world import world_background
 
 __all__ = ["ExportCancelled", "ExportError", "ExportResult", "export_scene", "render_size"]
@@ -86,13 +86,10 @@ def _optional_fields(cls, **values) -> dict:
 
 
 def _note_visibility(ob, noted: set[str], warnings: list[str]) -> None:
-    """Append ``ob``'s :func:`.visibility.ray_visibility_note` to ``warnings`` once per object."""
-    if ob.name in noted:
-        return
-    noted.add(ob.name)
-    note = ray_visibility_note(ob)
-    if note is not None:
-        warnings.append(note)
+    """Append ``ob``'s :func:`.visibility.ray_visibility_notes` to ``warnings`` once per object."""
+    if ob.name not in noted:
+        noted.add(ob.name)
+        warnings += ray_visibility_notes(ob)
 
 
 def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
@@ -160,10 +157,9 @@ def export_scene(depsgraph, *, camera_override=None, size=None, use_border=None,
         if ob.original.hide_render:
             continue
         if ob.type == "LIGHT":
-            _note_visibility(ob, noted, mesh_warnings)
+            _note_visibility(ob, noted, lights.warnings)
             names.append(_instance_name(inst))
-            lights.add(ob.data, _relative(inst.matrix_world, origin), len(names) - 1, ob.name,
-                       visible_camera=bool(getattr(ob, "visible_camera", False)))
+            lights.add(ob.data, _relative(inst.matrix_world, origin), len(names) - 1, ob.name)
             continue
         if ob.type not in GEOMETRY_TYPES or not inst.show_self:
             continue

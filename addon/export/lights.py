@@ -37,16 +37,11 @@ class LightCollector:
         self.areas: list[dict] = []
         self.warnings: list[str] = []
 
-    def add(self, light, matrix: np.ndarray, object_id: int, name: str,
-            visible_camera: bool = False) -> None:
-        """Add one light instance with its 4×4 world matrix; ``visible_camera``: the object's
-        Ray Visibility > Camera (off by default for lights)."""
+    def add(self, light, matrix: np.ndarray, object_id: int, name: str) -> None:
+        """Add one light instance with its 4×4 world matrix (its object's ray visibility is
+        :mod:`.visibility`'s)."""
         m = np.asarray(matrix, np.float64)
         rgb = self.light_rgb(light, name)
-        sized = light.type == "AREA" or (light.type in {"POINT", "SPOT"} and light.shadow_soft_size > 0)
-        if visible_camera and sized:
-            self.warnings.append(f"Light '{name}': visible to the camera in Cycles (Ray Visibility > "
-                                 "Camera); Ercuts does not show lights seen directly, only their light")
         position = m[:3, 3]
         down = _unit(m[:3, :3] @ np.array([0.0, 0.0, -1.0]))  # local −Z in the world
         kind = light.type

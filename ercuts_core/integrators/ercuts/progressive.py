@@ -50,15 +50,16 @@ E1_GROWTH = 0.5
 def iteration_e1_samples(e1_samples: int, k: int) -> int:
     """Ê1's light-traced samples per VPL in iteration ``k`` (0-based): N·(k+1)^E1_GROWTH.
 
-    The normalisation divides by Ê1, and 1/Ê1 keeps a bias of order 1/N per VPL after
-    :func:`~.vpl.estimate_e1_allocated`'s first-order (Jensen) correction, whose relative
-    variance comes from a pilot of a few hits: the VPL image's energy was 0.9915 ± 0.0039 of
-    its target at N = 256 in the glass-sphere scene (issue 15's test, 8 seeds), 0.998 at 512,
-    1.005 at 1024, 1.003 at 2048 — and the box's gathered light −1.7 % at 256 against
-    PATH's (0.0844 against 0.0859), +0.6 % at 512. A bias of the same size in every
-    iteration would survive any number of them; with N_k growing, the average over K
-    iterations has the bias Σ_k c/N_k / K ≈ 2c/(N·√K) → 0 (the consistency issue 13 asks
-    for, as the shrinking clamp of :func:`iteration_clamp` does for the clamp), at a cost of
+    The normalisation divides by Ê1, and 1/Ê1 keeps a bias that shrinks with N per VPL
+    after :func:`~.vpl.estimate_e1_allocated`'s correction: with the pilot-based (Jensen)
+    correction the VPL image's energy was 0.9915 ± 0.0039 of its target at N = 256 in the
+    glass-sphere scene (issue 15's test, 8 seeds), 0.998 at 512, 1.005 at 1024 — and the
+    box's gathered light −1.7 % at 256 against PATH's (0.0844 against 0.0859), +0.6 % at
+    512; the jackknife (:func:`~.vpl.jackknife_e1`) removes the 1/N term but leaves higher
+    orders. A bias of the same size in every iteration would survive any number of them;
+    with N_k growing, the average over K iterations has the bias Σ_k b(N_k) / K → 0
+    (≈ 2c/(N·√K) for a term c/N; the consistency issue 13 asks for, as the shrinking clamp
+    of :func:`iteration_clamp` does for the clamp), at a cost of
     (k+1)^½ times iteration 0's E1 phase. Paced iterations still cap it by their time."""
     return int(round(int(e1_samples) * (k + 1.0) ** E1_GROWTH))
 

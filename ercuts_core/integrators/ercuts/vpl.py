@@ -12,7 +12,8 @@ E1 is estimated by tracing the VPL's own emission one bounce to the camera
 pilot so that VPLs whose light rarely reaches the camera get more
 (:func:`estimate_e1_allocated`): 1/Ê1 has a Jensen bias E[1/Ê1] ≈ (1/E1)(1 + c_v/N_v) that
 made the VPL image up to 25 % too bright in the S-corridor with 256 samples per VPL
-(benchmarks/results/e1_bias.md). Where nothing is found, M shading points drawn from a
+(benchmarks/results/e1_bias.md); the allocation and a first-order correction
+(:data:`E1_BIAS_CORRECTION`) remove most of it. Where nothing is found, M shading points drawn from a
 mixture of the whole window and a neighbourhood of the VPL's home pixel (where the VPL
 certainly shines), one-sample MIS over the mixture [Veach 1997 §9.2.2] (:func:`estimate_e1`).
 The shading uses the *same* BRDF, visibility and geometry clamp as the final gather, as
@@ -297,7 +298,7 @@ def estimate_e1(scene: BuiltScene, g: GBuffer, window: Window, pos: NDArray, nor
 def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, color: NDArray,
                               gmax: float, n_samples: int, rng: np.random.Generator,
                               chunk: int = 1 << 18, keep_going=None, moments: bool = False,
-                              clear_receivers: bool = True):
+                              clear_receivers: bool = True, halves: bool = False):
     """(V,) Ê1 by tracing the VPL's own cosine emission one bounce to the camera.
 
     E1 = ∫_Ω f_r(y)·cosθ_v·|n_g(y)·ω_cam|·F(y)·V dω with F = 1/(A_pix·cos³θ·d_cam²) the
@@ -306,8 +307,9 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
     for the geometry clamp. Bounded for diffuse receivers away from the lens, unlike
     sampling pixels, whose samples near the VPL carry the 1/d² peak.
     ``keep_going(fraction) -> bool`` is called after each chunk; False stops (the rest stay 0).
-    With ``moments``, returns (Ê1, (V,) mean of the squared samples) instead. With
-    ``clear_receivers`` False, receivers on mirrors and glass count 0 (the gather follows the
+    With ``moments``, returns (Ê1, (V,) mean of the squared samples) instead, and with
+    ``halves`` too, (Ê1, mean of squares, (2, V) means of each VPL's even- and odd-numbered
+    samples: the jackknife's halves, :func:`jackknife_e1`). With ``clear_receivers`` False, receivers on mirrors and glass count 0 (the gather follows the
     camera through them, :func:`follow_specular`, so a VPL's image there is not its own).
     """
     from ...sampling import coordinate_system, sample_cosine_hemisphere, to_world
@@ -315,6 +317,7 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
     V = len(pos)
     total = np.zeros(V)
     total2 = np.zeros(V)
+    half = np.zeros((2, V))
     for v, vv, s in _chunks(V, n_samples, chunk):
         n = len(vv)
         local = sample_cosine_hemisphere(rng.random((n, 2)))
@@ -356,9 +359,23 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
         ns = n_samples if np.ndim(n_samples) == 0 else np.maximum(np.asarray(n_samples)[v], 1)
         total[v] = np.bincount(vv - s, weights=val, minlength=len(v)) / ns
         total2[v] = np.bincount(vv - s, weights=val * val, minlength=len(v)) / ns
+        if halves:
+            odd = _sample_parity(vv - s, len(v))
+            for i, n_i in enumerate(((ns + 1) // 2, ns // 2)):
+                half[i, v] = np.bincount(vv - s, weights=val * (odd == i), minlength=len(v)) / np.maximum(n_i, 1)
         if keep_going is not None and not keep_going((s + len(v)) / V):
             break
+    if halves:
+        return total, total2, half
     return (total, total2) if moments else total
+
+
+def _sample_parity(owner: NDArray, n_owners: int) -> NDArray:
+    """(n,) 0/1: whether each sample is its owner's even- or odd-numbered one; ``owner`` (n,)
+    sorted owner ids in [0, n_owners) (each VPL's samples are contiguous, :func:`_chunks`)."""
+    counts = np.bincount(owner, minlength=n_owners)
+    first = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    return (np.arange(len(owner)) - first[owner]) & 1
 
 
 #: A second-stage Ê1 whose own relative variance (of the mean) exceeds this is *shaky*: it
@@ -372,18 +389,19 @@ SHAKY_BUDGET = 0.25
 
 
 def _redraw_shaky(scene: BuiltScene, pos: NDArray, normal: NDArray, color: NDArray, gmax: float,
-                  counts: NDArray, e1: NDArray, e1_sq: NDArray, extra: tuple[int, int, float],
-                  rng: np.random.Generator, chunk: int, keep_going, clear_receivers: bool) -> None:
+                  counts: NDArray, e1: NDArray, e1_sq: NDArray, half: NDArray,
+                  extra: tuple[int, int, float], rng: np.random.Generator, chunk: int, keep_going,
+                  clear_receivers: bool) -> None:
     """Re-estimate the shaky VPLs' Ê1 (:data:`SHAKY_RELATIVE_VARIANCE`) with m fresh samples
     each, in place: ``extra`` = (least, most, total), m = total / (number of shaky VPLs)
-    clipped to [least, most].
+    clipped to [least, most] (and even for the jackknife's halves).
 
     ``e1``, ``e1_sq`` (V,): the second stage's means of the samples and of their squares over
-    ``counts`` (V,) samples. A shaky VPL's Ê1 becomes the mean of the m fresh samples alone
+    ``counts`` (V,) samples, ``half`` (2, V) the means of its halves (replaced too). A shaky VPL's Ê1 becomes the mean of the m fresh samples alone
     and its count m: the choice of the shaky VPLs depends on the second stage, so its samples
-    are biased given that choice (few hits: Ê1 low), while the fresh ones are not, and the
-    pilot's ĉ_v (untouched here), independent of both, keeps the Jensen correction
-    first-order unbiased. The earlier scheme pooled the second
+    are biased given that choice (few hits: Ê1 low), while the fresh ones are not; the
+    jackknife then uses the fresh samples' halves, and where one is empty the pilot's ĉ_v
+    (untouched here), independent of both, keeps the Jensen correction first-order unbiased. The earlier scheme pooled the second
     stage with the fresh samples and corrected with the second stage's ĉ_v, which is large
     exactly when that stage's Ê1 is small: it over-corrected, ``vpl_energy_ratio`` of the
     glass-sphere scene (issue 15) 0.974 ± 0.004 over 8 seeds; with this 0.991 ± 0.004
@@ -396,17 +414,59 @@ def _redraw_shaky(scene: BuiltScene, pos: NDArray, normal: NDArray, color: NDArr
         return
     least, most, total = extra
     m = int(np.clip(total / len(shaky), least, most))
-    more = estimate_e1_light_tracing(scene, pos[shaky], normal[shaky], color[shaky], gmax, m, rng, chunk,
-                                     keep_going, clear_receivers=clear_receivers)
+    if E1_BIAS_CORRECTION == "JACKKNIFE":
+        m += m & 1                                        # two equal halves
+    more, _, more_half = estimate_e1_light_tracing(scene, pos[shaky], normal[shaky], color[shaky], gmax, m,
+                                                   rng, chunk, keep_going, clear_receivers=clear_receivers,
+                                                   halves=True)
     e1[shaky] = more
+    half[:, shaky] = more_half
     counts[shaky] = m
 
 
-#: Divide out the first-order Jensen bias of 1/Ê1 with the pilot's relative variance
-#: (:func:`estimate_e1_allocated`); False = the ablation. Measured ``vpl_energy_ratio`` at
-#: 64×48 (brute-force gather), without → with: S-corridor seeds 1–3 1.061/1.031/1.028 →
-#: 1.036/1.009/1.009, door ajar 1.041 → 1.005, Cornell box 1.015 → 1.006.
-JENSEN_CORRECTION = True
+#: How :func:`estimate_e1_allocated` removes the first-order bias of 1/Ê1: 'JENSEN' (the
+#: delta method with the pilot's relative variance ĉ_v), 'JACKKNIFE' (:func:`jackknife_e1`,
+#: from the second stage's own samples: less bias at few samples, more variance — measured
+#: there) or 'NONE' (the ablation). Measured ``vpl_energy_ratio`` at 64×48 (brute-force
+#: gather), none → Jensen: S-corridor seeds 1–3 1.061/1.031/1.028 → 1.036/1.009/1.009, door
+#: ajar 1.041 → 1.005, Cornell box 1.015 → 1.006.
+E1_BIAS_CORRECTION = "JENSEN"
+
+
+def jackknife_e1(e1: NDArray, half: NDArray, fallback: NDArray) -> NDArray:
+    """(V,) Ê1 whose reciprocal is the jackknife estimate of 1/E1 [Quenouille 1956; Efron and
+    Tibshirani 1993, ch. 10] over two equal halves of each VPL's samples.
+
+    ``e1`` (V,) the mean of all samples, ``half`` (2, V) the means a, b of the two halves
+    (Ê1 = (a + b)/2), ``fallback`` (V,) the value where a half found nothing. With c the
+    relative variance of one sample and N the samples, E[1/Ê1] ≈ (1/E1)(1 + c/N) and
+    E[1/a] ≈ (1/E1)(1 + 2c/N) (delta method), so 1/Ê1_J = 2/Ê1 − (1/a + 1/b)/2 has no 1/N
+    term, measured from the samples that normalise the VPL rather than from the pilot's ĉ,
+    which rests on a quarter of the samples and few hits for exactly the VPLs that need it.
+    1/Ê1_J ≤ 1/Ê1 (arithmetic–harmonic mean inequality); it is kept ≥ ½/Ê1, the cap of the
+    delta method's correction.
+
+    ``vpl_energy_ratio`` (64×48, brute-force gather, seeds 1–6), pilot ĉ → jackknife: with
+    64 samples per VPL (a short paced iteration's count) S-corridor 1.036 ± 0.007 → 1.003 ±
+    0.007, door ajar 1.011 ± 0.005 → 0.997 ± 0.005; with 256 (the default) 1.008 ± 0.002 →
+    0.998 ± 0.002 and 1.002 ± 0.006 → 0.993 ± 0.007. The glass-sphere scene's 1–2 % deficit
+    (0.987 / 0.989 with the pilot's ĉ, 0.984 / 0.981 / 0.990 with the jackknife at 64 / 256 /
+    1024 samples, 8 seeds, ± 0.003–0.01) does not fall as 1/N: another cause.
+
+    Not the default: its correction is as noisy as it is large — at 136 samples per VPL
+    (the directly lit scene, one iteration) it took over 9 % off 1/Ê1 for a quarter of the
+    VPLs and over 46 % for 5 % (4.5 % clipped at ½; median 2.7 %) — and the
+    directly lit scene with six paced iterations in 60 s (121–156 samples per VPL, seed 1,
+    160×120) had 5.1× the gather's variance between iterations (8.7e-5 against 1.7e-5 of
+    the relMSE) and relMSE 1.4e-4 against the pilot ĉ's 5.4e-5; used only where the second
+    stage's relative variance of the mean is ≤ 0.05, still 3.2× (5.5e-5). On
+    tests/test_e1.py's Cornell-box VPLs with 32 samples (400 estimates) the mean of E1/Ê1
+    is 1.04–1.16 uncorrected, 1.00–1.10 with the pilot's ĉ and 0.98–1.08 with the jackknife."""
+    a, b = half
+    ok = (a > 0) & (b > 0)
+    inv = 1.0 / np.where(ok, e1, 1.0)
+    inv_j = 2.0 * inv - 0.5 * (1.0 / np.where(ok, a, 1.0) + 1.0 / np.where(ok, b, 1.0))
+    return np.where(ok, 1.0 / np.maximum(inv_j, 0.5 * inv), fallback)
 
 
 def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, color: NDArray,
@@ -424,9 +484,11 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
     bias Σ weight_v·c_v/N_v — at least the pilot's count and at most ``max_factor``·n_samples
     per VPL, and Ê1 is the mean of these second samples alone, so it stays unbiased (the
     allocation depends on the pilot only). VPLs whose pilot found nothing get the most.
-    With :data:`JENSEN_CORRECTION` the estimate is returned as Ê1/(1 − ĉ_v/N_v) (ĉ_v/N_v
-    capped at 0.5), so its reciprocal (1/Ê1)(1 − ĉ_v/N_v) loses the first-order bias: ĉ_v
-    comes from the pilot, independent of the second-stage samples (delta method). A
+    With :data:`E1_BIAS_CORRECTION` the estimate is returned so that its reciprocal loses the
+    first-order bias: as Ê1/(1 − ĉ_v/N_v) (ĉ_v/N_v capped at 0.5), whose ĉ_v comes from the
+    pilot, independent of the second-stage samples (delta method; the default), or by the
+    jackknife over the halves of the second stage (:func:`jackknife_e1`; the counts are made
+    even; the delta method where a half found nothing). A
     second-stage estimate resting on a few hits is replaced by fresh samples first
     (:func:`_redraw_shaky`). ``keep_going`` and ``clear_receivers`` as in
     :func:`estimate_e1_light_tracing` (fractions over both stages).
@@ -472,15 +534,20 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
             else:
                 hi_t = t
         counts = np.clip(lo_t * want, n1, hi).astype(np.int64)
-    e1, e1_sq = estimate_e1_light_tracing(scene, pos, normal, color, gmax, counts, rng, chunk,
-                                          stage(f1, 0.9), moments=True, clear_receivers=clear_receivers)
+    jackknife = E1_BIAS_CORRECTION == "JACKKNIFE"
+    if jackknife:
+        counts += counts & 1                              # two equal halves
+    e1, e1_sq, half = estimate_e1_light_tracing(scene, pos, normal, color, gmax, counts, rng, chunk,
+                                                stage(f1, 0.9), moments=True,
+                                                clear_receivers=clear_receivers, halves=True)
     if not stop[0]:
-        _redraw_shaky(scene, pos, normal, color, gmax, counts, e1, e1_sq,
+        _redraw_shaky(scene, pos, normal, color, gmax, counts, e1, e1_sq, half,
                       (n_samples, hi, SHAKY_BUDGET * budget), rng, chunk, stage(0.9, 1.0), clear_receivers)
-    if JENSEN_CORRECTION:
+    if E1_BIAS_CORRECTION != "NONE":
         # E[1/Ê1] ≈ (1/E1)(1 + c_v/N_v) (delta method); the pilot's ĉ_v is independent of
         # the second stage, so (1/Ê1)(1 − ĉ_v/N_v) is unbiased to second order.
-        e1 = e1 / (1.0 - np.minimum(c / np.maximum(counts, 1), 0.5))
+        jensen = e1 / (1.0 - np.minimum(c / np.maximum(counts, 1), 0.5))
+        e1 = jackknife_e1(e1, half, jensen) if jackknife else jensen
     # Found nothing: once more with the largest count (before the pixel-mixture estimate of
     # make_vpls, whose rare tiny values made single VPLs several % of the image energy).
     miss = np.flatnonzero(e1 <= 0)

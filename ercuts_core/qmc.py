@@ -128,3 +128,22 @@ class PixelSequence:
         if q < k:
             out[:, q:] = self.rng.random((len(lanes), k - q))
         return out
+
+    def padded(self, lanes: NDArray, k: int, n: int, start: int | None = None) -> list[NDArray]:
+        """``n`` points per sample for the next ``k`` ≤ :data:`MAX_DIMS` dimensions, which this
+        call consumes as :meth:`take` does: point j (len(lanes), k) is point ``start`` + j
+        (default: pass i·n + j) of another Sobol sequence in k dimensions, digitally shifted per
+        pixel by a stream of its own (a *padded* sequence, Kollig & Keller 2002, pbrt-v4's
+        ``PaddedSobolSampler``). When the passes take consecutive runs of it — ``start`` the
+        points the earlier passes took — a pixel's points are the first ones of one randomised
+        Sobol sequence, so several light samples per pass stay stratified with one another and
+        with those of earlier passes (runs with gaps are not: every eighth point alone puts its
+        first coordinate in one quarter); each point is uniform, so every estimate
+        from one is unbiased. They are not stratified jointly with the other dimensions."""
+        lanes = np.asarray(lanes, np.int64)
+        d0, self.dim = self.dim, self.dim + k
+        key = stream_key((self.seq.key, 0x9ADD, d0))
+        dims = np.arange(k)
+        shift = digital_shifts(key, self.pixels[lanes], dims)
+        start = self.seq.index * n if start is None else int(start)
+        return [(sobol_point(start + j)[dims][None, :] ^ shift) * _SCALE for j in range(n)]

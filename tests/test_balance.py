@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from ercuts_core.integrators.ercuts.balance import REL_EPS, DirectRival, PassVariance
+from ercuts_core.integrators.ercuts.balance import (LIGHT_SAMPLE_COST_RATIO, REL_EPS, DirectRival, PassVariance,
+                                                  light_samples_for, passes_at_equal_cost)
 from ercuts_core.integrators.ercuts.gather import Gather
 
 
@@ -122,3 +123,39 @@ def test_no_probe_and_no_competition_while_later_iterations_follow():
     passes, with no probe and no direct passes taken from it, however noisy those are."""
     passes, rival, state = _gather_and_rival(sigma_gather=0.05, sigma_direct=1.0, fills=False)
     assert passes == 2 and rival.extra == 0 and state["probe"] == 0
+
+
+@pytest.mark.parametrize("ratio, expected", [(12.0, 4), (0.12, 1), (0.8, 1), (3.0, 2), (100.0, 8), (1e4, 8)])
+def test_light_samples_follow_two_stage_samplings_optimum(ratio, expected):
+    """k* = √(c0/c1 · σ_w²/σ_b²) (Cochran §10.6), as the nearest power of two up to k_max:
+    σ_w²/σ_b² = 12 (soft shadows) → √24 ≈ 4.9 → 4; 0.12 (sharp shadows) → 0.49 → 1; 0.8 → 1.3
+    → 1; 3 → 2.4 → 2; capped at 8. The pilot's per-pass variance holds σ_w²/k; weights are
+    the relMSE's: doubling the within-hit spread of the bright half alone barely moves it."""
+    assert LIGHT_SAMPLE_COST_RATIO == 2.0
+    n, k = 1000, 2
+    ref = np.full(n, 0.5)
+    sb = np.full(n, 0.01)
+    sw = ratio * sb
+    assert light_samples_for(sb + sw / k, sw, k, ref, 8) == expected
+
+
+def test_light_samples_weigh_pixels_like_the_relmse():
+    """Bright pixels whose variance is all light sampling count for little next to dark ones
+    whose variance is all jitter (weights 1/(Y² + 0.01)): one light sample, and many where
+    only the light's part exists; none with no light spread at all."""
+    n, k = 1000, 2
+    ref = np.where(np.arange(n) < n // 2, 10.0, 0.05)
+    sw = np.where(ref > 1, 1.0, 0.0)
+    sb = np.where(ref > 1, 0.0, 0.01)
+    assert light_samples_for(sb + sw / k, sw, k, ref, 8) == 1
+    assert light_samples_for(sw / k, sw, k, ref, 8) == 8
+    assert light_samples_for(sb, np.zeros(n), k, ref, 8) == 1
+
+
+def test_more_light_samples_mean_fewer_passes_at_the_same_cost():
+    """A pass with k light samples costs (2 + k)/3 of one with one (c0/c1 = 2): 64 passes'
+    budget less 2 pilot passes with 2 (8/3 of a pass) leaves 61.33 → 61 passes with 1, 46
+    with 2, 30 with 4, 18 with 8; a spent budget still gets one."""
+    assert [passes_at_equal_cost(64, 2, 2, k) for k in (1, 2, 4, 8)] == [61, 46, 30, 18]
+    assert passes_at_equal_cost(3, 2, 2, 4) == 1
+    assert passes_at_equal_cost(10, 0, 1, 1) == 10

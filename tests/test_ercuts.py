@@ -10,6 +10,7 @@ import pytest
 
 from benchmarks.metrics import relmse
 from ercuts_core import RenderSettings, render
+from ercuts_core.integrators.ercuts.balance import passes_at_equal_cost
 from ercuts_core.sampling import luminance
 from ercuts_core.scenes import closed_room, s_corridor
 
@@ -63,7 +64,10 @@ def test_statistics_and_diagnostic_images(ercuts_room):
     assert st["nan_acceptances"] == 0 and st["nonfinite_samples"] == 0
     assert st["vpls_after_merge"] < st["vpls_before_merge"]
     if "direct_samples" in st:      # NEE: direct light in its own passes, VPLs indirect only
-        assert st["direct_samples"] == RenderSettings().direct_samples and st["vpls_emitter"] == 0
+        # the passes that cost what direct_samples passes with one light sample would
+        k = st["direct_light_samples"]
+        assert st["direct_samples"] == 2 + passes_at_equal_cost(RenderSettings().direct_samples, 2, 2, k)
+        assert st["vpls_emitter"] == 0
         assert 0 < st["P"] < st["P_all"]
     else:                           # VPL: the area light's VPLs carry the direct light
         assert st["vpls_emitter"] > 0 and "direct" not in ercuts_room.timings
@@ -366,3 +370,26 @@ def test_stochastic_gather_uses_the_time_left_for_more_passes():
     paced = render(closed_room(32, 24), s.replace(time_limit=6.0, iterations=1))
     assert paced.stats["gather_passes"] >= 2
     assert np.isfinite(paced.image).all()
+
+
+def test_direct_passes_take_more_light_samples_only_under_soft_shadows():
+    """After two pilot passes with two light samples the direct passes take as many as the
+    light's share of their variance asks for (``balance.light_samples_for``), in as many
+    passes as cost what ``direct_samples`` passes with one would: under the directly lit
+    scene's 2 m panel (soft shadows) more than one (four at 160×120; two at this 48×36,
+    whose larger pixels make the jitter's part larger), and under one point light — whose
+    light sample has no variance at all — one."""
+    import dataclasses
+    from ercuts_core.scenes import directly_lit, point_lit_box
+    fast = dict(FAST, direct_samples=6, shading_samples=1)
+    soft = render(directly_lit(48, 36), RenderSettings(seed=1, **fast))
+    box = point_lit_box()                   # its point light alone (with the spot: two lights)
+    pl = box.point_lights
+    one = dataclasses.replace(pl, **{f.name: (None if getattr(pl, f.name) is None else getattr(pl, f.name)[:1])
+                                     for f in dataclasses.fields(pl)})
+    point = render(dataclasses.replace(box, point_lights=one), RenderSettings(seed=1, **fast))
+    k = soft.stats["direct_light_samples"]
+    assert k >= 2 and point.stats["direct_light_samples"] == 1
+    # six passes' worth of time at one light sample: 2 pilot passes, then 2 with 2 or 3 with 1
+    assert soft.stats["direct_samples"] == 2 + passes_at_equal_cost(6, 2, 2, k) <= 4
+    assert point.stats["direct_samples"] == 2 + passes_at_equal_cost(6, 2, 2, 1) == 5

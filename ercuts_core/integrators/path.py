@@ -23,18 +23,25 @@ from numpy.typing import NDArray
 from ..bsdf import Bsdf
 from ..film import Film
 from ..lights import AREA, POINT, SUN
-from ..qmc import PassSequence
-from ..sampling import power_heuristic
+from ..qmc import PassSequence, PixelSequence
+from ..sampling import luminance, power_heuristic
 from ..vecmath import dot
 from .base import Integrator
 
 
 #: Which paths :class:`PathIntegrator` adds to the film (see its docstring).
 PATH_SETS = ("all", "direct_and_delta", "delta", "direct_and_late_delta")
+#: Most light samples at the first hit (:func:`next_event_stratified`).
+MAX_LIGHT_SAMPLES = 8
 
 
 class PathIntegrator(Integrator):
     """Path tracing with NEE + MIS; see the module docstring.
+
+    ``light_samples`` > 1 averages that many next-event estimates at the first camera hit
+    (:func:`next_event_stratified`), sharing the camera ray, the hit and the BSDF sample
+    among several shadow rays (ERCUTS's direct-light passes, where soft shadows are most of
+    their variance).
 
     ``paths`` selects the light paths whose contributions are added (the others are still
     traced, so that later vertices are found): 'all'; 'delta', the paths with at least one
@@ -52,15 +59,36 @@ class PathIntegrator(Integrator):
     and glass, ``has_specular_or_glass``) the last three stop after the first bounce.
     """
 
-    def __init__(self, scene, settings, paths: str = "all"):
+    def __init__(self, scene, settings, paths: str = "all", light_samples: int = 1):
         super().__init__(scene, settings)
         if paths not in PATH_SETS:
             raise ValueError(f"unknown path set {paths!r}; expected one of {PATH_SETS}")
+        if not 1 <= light_samples <= MAX_LIGHT_SAMPLES:
+            raise ValueError(f"light_samples must be in 1 … {MAX_LIGHT_SAMPLES}, got {light_samples}")
         self.paths = paths
+        #: light samples of next-event estimation at the first camera hit (one elsewhere):
+        #: :func:`next_event_stratified`; may change between passes
+        self.light_samples = int(light_samples)
+        #: (first padded point, first pass) of the passes with this many light samples
+        self._light_run = (0, 0)
+        #: (h·w,) or None: when an array and light_samples ≥ 2, every pass adds each pixel's
+        #: sample variance of one light sample's luminance at its first hit (the within-hit
+        #: part of a pass's variance, :func:`~.ercuts.balance.light_samples_for`)
+        self.light_spread: NDArray | None = None
         self.max_depth = settings.max_depth
         if paths != "all" and not (scene.has_specular_or_glass if paths == "direct_and_late_delta"
                                    else scene.has_delta):
             self.max_depth = min(self.max_depth, 1)
+
+    def set_light_samples(self, k: int, passes_done: int) -> None:
+        """Take ``k`` light samples at the first hit from pass ``passes_done`` on; its padded
+        points continue where the earlier passes' ended (a consecutive run,
+        :meth:`~ercuts_core.qmc.PixelSequence.padded`)."""
+        if not 1 <= k <= MAX_LIGHT_SAMPLES:
+            raise ValueError(f"light_samples must be in 1 … {MAX_LIGHT_SAMPLES}, got {k}")
+        point, first = self._light_run
+        self._light_run = (point + (passes_done - first) * self.light_samples, passes_done)
+        self.light_samples = int(k)
 
     def _counted(self, scatter: int, seen: NDArray, late: NDArray, nd: NDArray) -> NDArray:
         """(N,) bool: which of a bounce's contributions with ``scatter`` scattering vertices
@@ -144,10 +172,18 @@ class PathIntegrator(Integrator):
             if clear is not None:       # a VPL cannot sit on the mirror or glass after x_d
                 late = late | (clear & (nd == 1))
             nee = self._counted(depth + 1, seen, late, nd + 1)
-            u_nee = None if u is None else u.take(idx, 3)     # drawn either way: fixed dimensions
+            k = self.light_samples if depth == 0 else 1
             if not lights.empty and nee.any():
-                L_nee = next_event(scene, surf, wo, bsdf, rng, u=u_nee)
+                record = depth == 0 and k >= 2 and self.light_spread is not None
+                start = None if u is None else self._light_run[0] + (u.seq.index - self._light_run[1]) * k
+                L_nee, var = next_event_stratified(scene, surf, wo, bsdf, rng, k, u, idx, spread=record,
+                                                   start=start)
                 L[min(depth + 1, 2), idx] += beta * L_nee * nee[:, None]
+                if record:
+                    self.light_spread += np.bincount(pix[idx], weights=var * nee,
+                                                     minlength=len(self.light_spread))
+            elif u is not None:         # drawn either way: fixed dimensions
+                u.take(idx, 3)
             # Sample the BSDF for the next bounce.
             bs = bsdf.sample(wo, rng.random((len(idx), 3)) if u is None else u.take(idx, 3))
             beta = beta * bs.weight
@@ -185,6 +221,40 @@ class PathIntegrator(Integrator):
             return
         t = np.where(surf.valid[r], surf.t[r], np.inf)
         L[idx[r]] += beta[r] * self.scene.lights.radiance_along(o[r], d[r], t)
+
+
+def next_event_stratified(scene, surf, wo: NDArray, bsdf: Bsdf, rng: np.random.Generator, k: int,
+                          u: PixelSequence | None = None, lanes: NDArray | None = None,
+                          spread: bool = False, start: int | None = None) -> tuple[NDArray, NDArray | None]:
+    """The mean of ``k`` ≤ :data:`MAX_LIGHT_SAMPLES` next-event estimates (:func:`next_event`,
+    with MIS) at the same surfaces, and with ``spread`` their sample variance.
+
+    With the pass's quasi-random numbers ``u`` the k estimates take points ``start`` …
+    ``start`` + k − 1 of the samples ``lanes``' (N,) padded Sobol sequence in the next three
+    dimensions (:meth:`~ercuts_core.qmc.PixelSequence.padded`: stratified with one another and
+    with the light samples of the other passes), else k independent ones from ``rng``. Every
+    estimate is unbiased and keeps its one-sample MIS weight against the BSDF sample, so the
+    weights of a path still sum to one and the mean is unbiased (weights with k·p_light, the
+    multi-sample heuristic of Veach 1997 §9.2.4, would be slightly better). k = 1 is
+    :func:`next_event` with the pass's next three dimensions.
+
+    Returns:
+        ((N, 3) the mean, (N,) the estimates' sample variance of luminance (Σ (Y_j − Ȳ)²/(k − 1),
+        an estimate of one light sample's variance; None unless ``spread`` and k ≥ 2)).
+    """
+    if k == 1:
+        return next_event(scene, surf, wo, bsdf, rng, u=None if u is None else u.take(lanes, 3)), None
+    points = [None] * k if u is None else u.padded(lanes, 3, k, start)
+    total, y1, y2 = np.zeros((len(wo), 3)), np.zeros(len(wo)), np.zeros(len(wo))
+    for p in points:
+        e = next_event(scene, surf, wo, bsdf, rng, u=p)
+        total += e
+        if spread:
+            y = luminance(e)
+            y1 += y
+            y2 += y * y
+    var = np.maximum(y2 - y1 * y1 / k, 0.0) / (k - 1) if spread else None
+    return total / k, var
 
 
 def next_event(scene, surf, wo: NDArray, bsdf: Bsdf, rng: np.random.Generator, mis: bool = True,

@@ -63,14 +63,13 @@ class PathIntegrator(Integrator):
         super().__init__(scene, settings)
         if paths not in PATH_SETS:
             raise ValueError(f"unknown path set {paths!r}; expected one of {PATH_SETS}")
-        if not 1 <= light_samples <= MAX_LIGHT_SAMPLES:
-            raise ValueError(f"light_samples must be in 1 … {MAX_LIGHT_SAMPLES}, got {light_samples}")
         self.paths = paths
         #: light samples of next-event estimation at the first camera hit (one elsewhere):
-        #: :func:`next_event_stratified`; may change between passes
-        self.light_samples = int(light_samples)
+        #: :func:`next_event_stratified`; may change between passes (:meth:`set_light_samples`)
+        self.light_samples = 1
         #: (first padded point, first pass) of the passes with this many light samples
         self._light_run = (0, 0)
+        self.set_light_samples(light_samples, 0)
         #: (h·w,) or None: when an array and light_samples ≥ 2, every pass adds each pixel's
         #: sample variance of one light sample's luminance at its first hit (the within-hit
         #: part of a pass's variance, :func:`~.ercuts.balance.light_samples_for`)

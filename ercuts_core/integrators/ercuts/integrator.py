@@ -375,8 +375,9 @@ class ErcutsIntegrator:
 
         t0 = time.perf_counter()
         samples = self.settings.direct_samples
-        first = 2 if pilot and samples > 2 else samples
-        if pilot and samples > 2:
+        piloted = bool(pilot) and samples > 2
+        first = 2 if piloted else samples
+        if piloted:
             path.light_spread = np.zeros(n)
         direct = self._passes(path, "Direct light", (0xD1,), "direct", show=False, samples=first,
                               on_pass=on_pass, span=(0.0, first / samples))
@@ -392,8 +393,8 @@ class ErcutsIntegrator:
         self.stats["direct_samples"] = n_done = direct.passes_done
         base, alpha = direct.light_parts(), direct.alpha / max(n_done, 1)
         # seconds per pass: of the passes after the pilot when there are some
-        later = n_done - first
-        seconds = (time.perf_counter() - (t1 if later > 0 else t0)) / max(later if later > 0 else n_done, 1)
+        since, count = (t1, n_done - first) if n_done > first else (t0, n_done)
+        seconds = (time.perf_counter() - since) / max(count, 1)
         del direct                                       # (its AOVs are not needed: 1080p memory)
 
         def one_more() -> bool:

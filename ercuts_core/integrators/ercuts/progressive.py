@@ -57,9 +57,9 @@ def iteration_e1_samples(e1_samples: int, k: int) -> int:
     box's gathered light −1.7 % at 256 against PATH's (0.0844 against 0.0859), +0.6 % at
     512; re-measured at stop 42 that scene's gap did not fall as 1/N (0.987 / 0.989 at 64 /
     256 samples; 0.9935 ± 0.0033 over 24 seeds at 256), while the S-corridor's and door's
-    did (:func:`~.vpl.jackknife_e1`). A bias of the same size in every iteration would survive any number of them;
-    with N_k growing, the average over K iterations has the bias Σ_k b(N_k) / K → 0
-    (≈ 2c/(N·√K) for a term c/N; the consistency issue 13 asks for, as the shrinking clamp
+    did (:func:`~.vpl.jackknife_e1`). A bias of the same size in every iteration would
+    survive any number of them; with N_k growing, the average over K iterations has the bias
+    Σ_k b(N_k) / K → 0 (≈ 2c/(N·√K) for a term c/N; the consistency issue 13 asks for, as the shrinking clamp
     of :func:`iteration_clamp` does for the clamp), at a cost of
     (k+1)^½ times iteration 0's E1 phase. Paced iterations still cap it by their time."""
     return int(round(int(e1_samples) * (k + 1.0) ** E1_GROWTH))

@@ -59,8 +59,8 @@ def iteration_e1_samples(e1_samples: int, k: int) -> int:
     256 samples; 0.9935 ± 0.0033 over 24 seeds at 256), while the S-corridor's and door's
     did (:func:`~.vpl.jackknife_e1`). A bias of the same size in every iteration would
     survive any number of them; with N_k growing, the average over K iterations has the bias
-    Σ_k b(N_k) / K → 0 (≈ 2c/(N·√K) for a term c/N; the consistency issue 13 asks for, as the shrinking clamp
-    of :func:`iteration_clamp` does for the clamp), at a cost of
+    Σ_k b(N_k) / K → 0 (≈ 2c/(N·√K) for a term c/N; the consistency issue 13 asks for, as
+    the shrinking clamp of :func:`iteration_clamp` does for the clamp), at a cost of
     (k+1)^½ times iteration 0's E1 phase. Paced iterations still cap it by their time."""
     return int(round(int(e1_samples) * (k + 1.0) ** E1_GROWTH))
 

@@ -12,6 +12,7 @@ from ercuts_core.integrators.ercuts.bias_compensation import (COMPENSATION_MAX_R
                                                                compensate, compensates, compensation_rays,
                                                                compensation_weight, reach)
 from ercuts_core.integrators.ercuts.vpl import clamp_factor
+from ercuts_core.description import MaterialTable
 from ercuts_core.scene import BuiltScene
 from ercuts_core.scenes import _Builder, _camera, _diffuse_table, closed_room
 from ercuts_core.validate import sanitize
@@ -74,6 +75,28 @@ def test_compensation_estimates_the_removed_light(corner, s):
     assert se < 0.03 * true
     assert abs(mean - true) < 4 * se, (mean, true, se)
     assert np.array_equal(near, out[:, 0] > 0)
+
+
+def test_no_compensation_from_surfaces_that_hold_no_vpl():
+    """Mirrors, glass and polished metals hold no VPL (``Bsdf.is_specular_or_glass``): the
+    clamp took no light from them, and the paths that reflect there are the direct passes'.
+    A compensation ray that lands on one adds nothing (it added that light a second time).
+    The corner's wall is a polished metal here: every receiver's compensation is 0, while
+    the grey wall's is not (:func:`test_compensation_estimates_the_removed_light`)."""
+    b = _Builder()
+    o = b.object("Corner")
+    b.quad((0, 0, -4), (0, 0, 4), (4, 0, 4), (4, 0, -4), 0, o)
+    b.quad((0, 0, -4), (0, 4, -4), (0, 4, 4), (0, 0, 4), 1, o)
+    mats = MaterialTable(["Grey", "Metal"], [[RHO] * 3, [0.9] * 3], [1.0, 0.3], [0.0, 1.0], [0.0, 0.5],
+                         np.zeros((2, 3)), (), [0.0, 0.0], [1.5, 1.5])
+    scene = BuiltScene(sanitize(b.description(mats, _camera((3, 2, 0), (0, 0, 0), 8, 6))).desc, threads=1)
+    assert scene.has_specular_or_glass
+    n = 20_000
+    p = np.tile([0.1, 0.0, 0.0], (n, 1))
+    up = np.tile([0.0, 1.0, 0.0], (n, 1))
+    out, near = compensate(scene, GMAX, p, up, up, up, np.zeros(n, np.int64), np.random.default_rng(5),
+                           lambda q, *a: np.full((len(q), 3), L0), depth=1)
+    assert not out.any() and not near.any()
 
 
 def test_no_clamp_no_compensation(corner):

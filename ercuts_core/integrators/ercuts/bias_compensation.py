@@ -109,7 +109,9 @@ def compensate(scene: BuiltScene, gmax: float, p: NDArray, ng: NDArray, ns: NDAr
         wo_y = -wi[h]
         sign = np.where(dot(y.ng, wo_y) < 0.0, -1.0, 1.0)[:, None]
         ng_y, ns_y = y.ng * sign, y.ns * sign
-        w = compensation_weight(gmax, y.t ** 2, dot(ns_y, wo_y))
+        w = compensation_weight(gmax, y.t ** 2, dot(ng_y, wo_y))
+        if scene.has_specular_or_glass:     # no VPL stands there: the clamp removed nothing
+            w[scene.bsdf(y.mat, ns_y, ng_y, y.p).is_specular_or_glass] = 0.0
         b = beta[go[h]] * bs.weight[go[h]] * w[:, None]
         live = np.flatnonzero(b.max(axis=1) > 0.0)
         if len(live) == 0:

@@ -31,7 +31,8 @@ class ChainResult:
     """VPL records produced by the chains.
 
     Attributes:
-        position: (V, 3) x2 of each VPL [m]; normal: (V, 3) unit, facing x1.
+        position: (V, 3) x2 of each VPL [m]; normal: (V, 3) unit geometric normal at x2, facing
+            x1 (the patch's emission axis, not a normal map's shading normal).
         count: (V,) number of deposits (each worth e_d of image energy).
         color_sum: (V, 3) sum over deposits of the relative colour (luminance 1) of the
             light leaving x2 toward x1.
@@ -93,7 +94,7 @@ class _VPLStore:
         self._grow(self.n + m)
         ids = np.arange(self.n, self.n + m)
         x1, x2 = paths.p[:, 1], paths.p[:, 2]
-        n = paths.ns[:, 2]
+        n = paths.ng[:, 2]
         flip = dot(n, x1 - x2) < 0
         self.position[ids] = x2
         self.normal[ids] = np.where(flip[:, None], -n, n)

@@ -1,6 +1,6 @@
 """Paper step 3 — VPLs from the chains, and their intensity normalisation.
 
-Each VPL sits at a chain's x2 with the surface normal facing x1 and emits like a small
+Each VPL sits at a chain's x2 with the geometric normal facing x1 and emits like a small
 diffuse patch: intensity I·max(0, n·ω) [Keller 1997]. The paper gives it raw intensity
 k (its number of chain states) and real intensity k·P/(n·P*) with P* its rendered image
 energy. Following algorithm.md §G.4 we measure P* at *unit* intensity, E1(v) = Σ_pixels

@@ -127,8 +127,8 @@ from .progressive import (iteration_end, iteration_settings, iteration_target, m
 from .paths import PathBatch
 from .seeding import seed_paths
 from . import warm_up
-from .vpl import (SPECULAR_BOUNCES, GBuffer, build_gbuffer, first_hits_only, follow_specular, g_clamp,
-                  make_vpls)
+from .vpl import (PIXEL_SAMPLE_RATE, SPECULAR_BOUNCES, GBuffer, build_gbuffer, first_hits_only,
+                  follow_specular, g_clamp, make_vpls)
 
 #: The gather shades what perfect mirrors show and smooth glass lets through with the VPLs
 #: (algorithm.md §G.3, :func:`~.vpl.follow_specular`); False = the ablation: every path with
@@ -143,7 +143,8 @@ FOLLOW_SPECULAR = True
 #: 1.4e-4 with 1, 2, 4 (its small panel's shadows are sharp: the pixel's jitter dominates).
 #: None: one light sample throughout (the ablation).
 PILOT_LIGHT_SAMPLES: int | None = 2
-#: Conservative throughput of the E1 estimate (light-traced samples per second, 2 cores).
+#: Conservative throughput of the E1 estimate (light-traced samples per second, 2 cores; a
+#: share ``vpl.PIXEL_SAMPLE_RATE`` of them comes with a pixel sample of about the same cost).
 _E1_RATE = 1.0e6
 #: A paced iteration traces seed paths for at most this share of the ER chains' time share
 #: (:meth:`ErcutsIntegrator._seed_deadline`): 81 920 chains need ≈ 330 000 seed pixels (38 s
@@ -542,7 +543,8 @@ class ErcutsIntegrator:
         n_e1 = s.e1_samples
         if sched.paced:
             budget = max(sched.deadline("vpl") - time.perf_counter(), 0.0)
-            n_e1 = int(min(n_e1, max(16, budget * _E1_RATE / max(int((chains.count > 0).sum()), 1))))
+            rate = _E1_RATE / (1.0 + PIXEL_SAMPLE_RATE)
+            n_e1 = int(min(n_e1, max(16, budget * rate / max(int((chains.count > 0).sum()), 1))))
         stats["e1_samples"] = n_e1
         label = f"| {stats['vpls_after_merge']} VPLs x {n_e1} E1 samples"
         vpls = make_vpls(self.scene, g, chains, e_d, gmax, n_e1, rng,

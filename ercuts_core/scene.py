@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .arrays import take_rows
-from .bsdf import DELTA_ALPHA, SHARP_ROUGHNESS, Bsdf, bsdf_max_value
+from .bsdf import DELTA_ALPHA, Bsdf, bsdf_max_value
 from .camera import Camera
 from .description import SceneDescription
 from .lights import LightSet
@@ -95,9 +95,9 @@ class BuiltScene:
         self.camera = Camera(desc.camera)
         self.scene_radius = self.lights.radius
         self.has_delta = _has_delta(desc.materials, self.tri_mat)
-        #: Some triangle's material may be a mirror, glass or a polished metal
-        #: (``Bsdf.is_specular_or_glass``; conservative: any transmission, any metal below
-        #: roughness 0.5, programmed or not): ERCUTS's gather follows the camera through them.
+        #: Some triangle's material may be a mirror, glass or a metal (``Bsdf.is_specular_or_glass``;
+        #: conservative: any transmission or metal, programmed or not): ERCUTS's gather follows
+        #: the camera through them.
         self.has_specular_or_glass = self.has_delta or _maybe_specular_or_glass(desc.materials, self.tri_mat)
 
     def intersect(self, o: NDArray, d: NDArray, tmax=None) -> Surface:
@@ -187,16 +187,14 @@ class BuiltScene:
 
 
 def _maybe_specular_or_glass(mats, tri_mat: NDArray) -> bool:
-    """True when some triangle's material may be glass or a polished metal (conservative: it
-    transmits, or is metallic below roughness ``SHARP_ROUGHNESS`` — a program's output of
-    those counting as such)."""
+    """True when some triangle's material may be glass or a metal (conservative: it transmits
+    or is metallic, a program's output of those counting as such)."""
     used = np.unique(tri_mat)
     used = used[(used >= 0) & (used < mats.n_materials)]
     prog = [mats.programs[i] if mats.has_programs else "" for i in used]
     glass = (np.asarray(mats.transmission)[used] > 0) | np.array(['"transmission"' in p for p in prog], bool)
     metal = (np.asarray(mats.metallic)[used] > 0) | np.array(['"metallic"' in p for p in prog], bool)
-    sharp = (np.asarray(mats.roughness)[used] < SHARP_ROUGHNESS) | np.array(['"roughness"' in p for p in prog], bool)
-    return bool((glass | (metal & sharp)).any())
+    return bool((glass | metal).any())
 
 
 def _has_delta(mats, tri_mat: NDArray) -> bool:

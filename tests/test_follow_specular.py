@@ -166,3 +166,22 @@ def test_ercuts_through_mirrors_keeps_path_tracings_energy(monkeypatch):
     print("PATH", path.mean(), se(path), "follow", follow.mean(), se(follow), "ablation", ablation.mean(), se(ablation))
     for e in (follow, ablation):
         assert abs(e.mean() / path.mean() - 1) < 0.02 + 4 * np.hypot(se(path), se(e)) / path.mean()
+
+
+def test_metals_of_any_roughness_are_followed_and_hold_no_vpl():
+    """``Bsdf.is_specular_or_glass`` marks every lobe without a diffuse part — a metal of any
+    roughness, glass — and nothing with one: a VPL on a metal emits like a diffuse patch, not
+    along the metal's lobe (tests/blender/test_gltf_cycles.py: roughness 0.6 metal stripes
+    left the floor beside them 64 % short of its indirect light), so the gather follows the
+    camera through metals and the chains leave them out; a half-metallic Principled keeps its
+    diffuse part and its VPLs."""
+    from ercuts_core.bsdf import Bsdf
+    rough = [0.0, 0.3, 0.6, 1.0, 0.6, 0.6, 1.0]
+    metal = [1.0, 1.0, 1.0, 1.0, 0.5, 0.0, 0.0]
+    trans = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+    n = len(rough)
+    mats = MaterialTable([f"m{i}" for i in range(n)], [[0.8] * 3] * n, rough, metal, [0.5] * n,
+                         np.zeros((n, 3)), (), trans, [1.5] * n)
+    up = np.tile([0.0, 0.0, 1.0], (n, 1))
+    clear = Bsdf.from_table(mats, np.arange(n), up, up).is_specular_or_glass
+    assert clear.tolist() == [True, True, True, True, False, False, True]

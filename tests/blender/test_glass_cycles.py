@@ -95,7 +95,8 @@ def test_white_mirror_floor(tmp_path, integrator):
 # sharp glossy lobe that estimate is heavy-tailed — mostly too small, 1/Ê1 too large: the
 # VPL image was 24.4× P on this floor (×26 its indirect light, image mean ×3–4; roughness
 # 0.05: ×880; 0.2: ×2.3). Now the gather follows the camera through such polished metals
-# (Bsdf.is_specular_or_glass, roughness < 0.5) and the chains and Ê1 leave them out.
+# (Bsdf.is_specular_or_glass: below roughness 0.5 until stop 44, every metal since) and the
+# chains and Ê1 leave them out.
 
 
 @pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])

@@ -177,16 +177,18 @@ def test_imported_materials_are_the_gltf_node_patterns(gltf_scene):
 
 
 # ERCUTS's bottom-right 8×8 block was ≈ 5 % darker than Cycles' (max |z| 4.32, 4.85 with
-# several light samples per direct pass): an xfail until stop 44, its cause unknown. One cause
-# found: the VPLs stood on the *shading* normal, so on this normal-mapped floor every VPL's
-# emission axis was tilted by up to 25°; they stand on the geometric normal now (er_sampling.
-# _VPLStore; tests/test_er_sampling.py::test_vpls_stand_on_the_geometric_normal): max |z|
-# 3.03, mean z² 0.73, means +0.56/+0.30/+0.14 %. Core renders, 64×48, against a Cycles image
-# of 8192 samples, four seed pairs: worst |z| 4.26/5.16/3.77/4.33 → 3.02/3.81/1.73/2.87.
-# Left: the box's metal stripes (roughness 0.6) hold VPLs, which emit like diffuse patches,
-# not like their GGX lobe: the indirect light beside the box is ≈ 60 % short and on the floor
-# in front 30–50 % too bright (8 seeds, against PATH with 8192 samples); the indirect light is
-# 4 % of this image, so its 8×8 blocks stay within 1–2 %.
+# several light samples per direct pass): an xfail until stop 44, its cause unknown. Three
+# causes found (README, stop 44), measured on core renders (64×48, 8 seeds, light passes
+# against PATH with 8192 samples, blocks against Cycles with 8192): (1) the VPLs stood on the
+# *shading* normal, tilted by up to 25° on this normal-mapped floor (er_sampling._VPLStore;
+# tests/test_er_sampling.py::test_vpls_stand_on_the_geometric_normal); (2) floor VPLs whose
+# emission mostly escapes this open scene had a heavy-tailed light-traced Ê1: the VPL image
+# 1.107× P, now 1.007× with pixel samples (vpl._camera_side; tests/test_e1.py); (3) the box's
+# metal stripes (roughness 0.6) held VPLs emitting like diffuse patches: the floor beside the
+# box 64 % short of its indirect light, in front 27–43 % over; every metal is followed now
+# (tests/test_follow_specular.py::test_metals_of_any_roughness_are_followed_and_hold_no_vpl).
+# Worst 8×8 block over four seed pairs: 4.26/5.16/3.77/4.33σ → 3.17/1.69/1.36/2.32σ. This
+# test (seeds 1–2, Cycles 512 samples): max |z| 3.00, mean z² 0.36, means −0.31/−0.07/−0.01 %.
 
 
 @pytest.mark.parametrize("integrator, spp", [

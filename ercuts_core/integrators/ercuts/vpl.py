@@ -428,8 +428,8 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
 #: sample: E[sample] = ∫h·(p_lt + ρ·p_cam)/(p_lt + ρ·p_cam) = E1; the samples stay independent).
 #: ``vpl_energy_ratio`` (64×48, seeds 1–8 / 1–4) with ρ = 0 / 0.25 / 1: the glTF test's open
 #: scene 1.107 (1.003–1.294) / 1.007 (0.996–1.036, 4 seeds) / 1.005 (0.996–1.028); S-corridor
-#: 1.009 / – / 1.003; door ajar 1.001 / – / 0.991; Cornell box 0.92 whatever ρ (that deficit is
-#: not Ê1's). A pixel sample costs about one light-traced one: the VPL phase took 5.1–5.7 s
+#: 1.009 / 1.006 / 1.003; door ajar 1.001 / 0.990 / 0.991 (spread ± 0.02); Cornell box 0.92
+#: whatever ρ (that deficit is not Ê1's). A pixel sample costs about one light-traced one: the VPL phase took 5.1–5.7 s
 #: with ρ = 0 and 9.9–12.2 s with ρ = 1 (Cornell box, 160×120, 26 000 VPLs).
 PIXEL_SAMPLE_RATE = 0.25
 

@@ -96,8 +96,9 @@ def compensate(scene: BuiltScene, gmax: float, p: NDArray, ng: NDArray, ns: NDAr
         return out, near
     idx, beta = np.arange(n), np.ones((n, 3))
     t_max = reach(gmax)
+    bsdf = None                             # of the level's points when already evaluated
     for level in range(depth):
-        bsdf = scene.bsdf(mat, ns, ng, p)
+        bsdf = scene.bsdf(mat, ns, ng, p) if bsdf is None else bsdf
         bs = bsdf.sample(wo, rng.random((len(idx), 3)))
         go = np.flatnonzero(bs.valid & ~bs.is_delta & (bs.weight.max(axis=1) > 0))
         if len(go) == 0:
@@ -110,8 +111,10 @@ def compensate(scene: BuiltScene, gmax: float, p: NDArray, ng: NDArray, ns: NDAr
         sign = np.where(dot(y.ng, wo_y) < 0.0, -1.0, 1.0)[:, None]
         ng_y, ns_y = y.ng * sign, y.ns * sign
         w = compensation_weight(gmax, y.t ** 2, dot(ng_y, wo_y))
+        bsdf = None
         if scene.has_specular_or_glass:     # no VPL stands there: the clamp removed nothing
-            w[scene.bsdf(y.mat, ns_y, ng_y, y.p).is_specular_or_glass] = 0.0
+            bsdf = scene.bsdf(y.mat, ns_y, ng_y, y.p)
+            w[bsdf.is_specular_or_glass] = 0.0
         b = beta[go[h]] * bs.weight[go[h]] * w[:, None]
         live = np.flatnonzero(b.max(axis=1) > 0.0)
         if len(live) == 0:
@@ -120,6 +123,7 @@ def compensate(scene: BuiltScene, gmax: float, p: NDArray, ng: NDArray, ns: NDAr
         if level == 0:
             near[idx] = True
         p, ng, ns, wo, mat = y.p[live], ng_y[live], ns_y[live], wo_y[live], y.mat[live]
+        bsdf = None if bsdf is None else bsdf.subset(live)
         np.add.at(out, idx, beta * radiance_at(p, ng, ns, wo, mat))
     return out, near
 

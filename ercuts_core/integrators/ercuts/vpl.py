@@ -335,9 +335,10 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
                               clear_receivers: bool = True, halves: bool = False,
                               home: NDArray | None = None):
     """(V,) Ê1 by tracing the VPL's own cosine emission one bounce to the camera; with
-    ``home`` (V, 2) (the VPLs' home raster positions) and a pinhole camera, every sample is a
-    pair, one light-traced and one pixel sample (:func:`_camera_side`, :class:`PixelMixture`),
-    combined by the balance heuristic (Veach 1997 §9.2; :func:`uses_pixel_samples`).
+    ``home`` (V, 2) (the VPLs' home raster positions) and a pinhole camera, a share
+    :data:`PIXEL_SAMPLE_RATE` of the samples also take a pixel sample (:func:`_camera_side`,
+    :class:`PixelMixture`), combined by the balance heuristic (Veach 1997 §9.2;
+    :func:`uses_pixel_samples`).
 
     E1 = ∫_Ω f_r(y)·cosθ_v·|n_g(y)·ω_cam|·F(y)·V dω with F = 1/(A_pix·cos³θ·d_cam²) the
     camera connection factor (Camera.connect); with cosine sampling (pdf cosθ_v/π) a sample
@@ -429,8 +430,9 @@ def estimate_e1_light_tracing(scene: BuiltScene, pos: NDArray, normal: NDArray, 
 #: ``vpl_energy_ratio`` (64×48, seeds 1–8 / 1–4) with ρ = 0 / 0.25 / 1: the glTF test's open
 #: scene 1.107 (1.003–1.294) / 1.007 (0.996–1.036, 4 seeds) / 1.005 (0.996–1.028); S-corridor
 #: 1.009 / 1.006 / 1.003; door ajar 1.001 / 0.990 / 0.991 (spread ± 0.02); Cornell box 0.92
-#: whatever ρ (that deficit is not Ê1's). A pixel sample costs about one light-traced one: the VPL phase took 5.1–5.7 s
-#: with ρ = 0 and 9.9–12.2 s with ρ = 1 (Cornell box, 160×120, 26 000 VPLs).
+#: whatever ρ (that deficit is not Ê1's). A pixel sample costs about one light-traced one:
+#: the VPL phase took 5.1–5.7 s with ρ = 0 and 9.9–12.2 s with ρ = 1 (Cornell box, 160×120,
+#: 26 000 VPLs).
 PIXEL_SAMPLE_RATE = 0.25
 
 
@@ -443,42 +445,38 @@ def uses_pixel_samples(camera) -> bool:
 def _camera_side(scene: BuiltScene, mix: PixelMixture, pos: NDArray, normal: NDArray, color: NDArray,
                  vv: NDArray, gmax: float, rng: np.random.Generator, clear_receivers: bool) -> NDArray:
     """(n,) one pixel sample of E1 per entry of ``vv`` (VPL ids), MIS-weighted against light
-    tracing (:func:`estimate_e1_light_tracing`, balance heuristic, one sample of each per
-    pair): a pixel from ``mix``, a jittered pinhole ray, the first surface y it finds and the
-    VPL's light there, L_v(y)·|cos_y|·F / (p_cam + p_lt) with the area densities of y
+    tracing (:func:`estimate_e1_light_tracing`, balance heuristic with the share ρ of
+    :data:`PIXEL_SAMPLE_RATE`): a pixel from ``mix``, a jittered pinhole ray, the first
+    surface y it finds and the VPL's light there (:func:`vpl_radiance`, as the gather shades
+    it), L_v(y)·|cos_y|·F / (ρ·p_cam + p_lt) with the area densities of y
     p_cam = q(pixel)·|cos_y|·F (:meth:`Camera.connect`: the pixel measure per unit area) and
     p_lt = (cosθ_v/π)·|cos_y,v|/d² (the VPL's cosine emission)."""
     cam, window, n = scene.camera, mix.window, len(vv)
     val = np.zeros(n)
     px, py = mix.sample(vv, rng)
     q = mix.pmf(vv, px, py)
-    raster = window.raster(py * window.width + px).astype(np.float64) + rng.random((n, 2))
-    o, d = cam.generate_rays(raster)
+    pix = py * window.width + px
+    o, d = cam.generate_rays(window.raster(pix).astype(np.float64) + rng.random((n, 2)))
     surf = scene.intersect(o, d)
     h = np.flatnonzero(surf.valid)
     if len(h) == 0:
         return val
     y, wo = surf.subset(h), -d[h]
     sg = np.where(dot(y.ng, wo) < 0, -1.0, 1.0)[:, None]
-    ng, ns = y.ng * sg, y.ns * sg
-    to_v = pos[vv[h]] - y.p
-    d2 = dot(to_v, to_v)
-    wi = to_v / np.sqrt(np.maximum(d2, 1e-300))[:, None]
-    cos_v = np.maximum(-dot(normal[vv[h]], wi), 0.0)
-    bsdf = scene.bsdf(y.mat, ns, ng, y.p)
-    f = luminance(bsdf.eval(wo, wi) * color[vv[h]]) * np.abs(dot(ns, wi))
+    g = GBuffer(pix[h], y.p, y.ng * sg, y.ns * sg, wo, y.mat, np.ones(len(h), bool), y, 1)
+    v = vv[h]
+    L, _ = vpl_radiance(scene, g, np.arange(len(h)), pos[v], normal[v], color[v], gmax)
+    f = luminance(L)
     if not clear_receivers:
-        f = np.where(bsdf.is_specular_or_glass, 0.0, f)
+        f = np.where(scene.bsdf(y.mat, g.ns, g.ng, y.p).is_specular_or_glass, 0.0, f)
+    to_v = pos[v] - y.p
+    d2 = np.maximum(dot(to_v, to_v), 1e-300)
+    cos_v = np.maximum(-dot(normal[v], to_v), 0.0) / np.sqrt(d2)
     con = cam.connect(y.p)
-    cos_y = np.abs(dot(ng, wo))
+    cos_y = np.abs(dot(g.ng, wo))
     p_cam = PIXEL_SAMPLE_RATE * q[h] * cos_y * con.factor
-    p_lt = cos_v / np.pi * np.abs(dot(ng, wi)) / np.maximum(d2, 1e-300)
-    L = f * cos_v / np.maximum(d2, 1e-300) * clamp_factor(gmax, d2, cos_v)
-    contrib = np.where(p_cam > 0, L * cos_y * con.factor / np.maximum(p_cam + p_lt, 1e-300), 0.0)
-    good = np.flatnonzero(contrib > 0)
-    if len(good):
-        vis = scene.tracer.visible(y.p[good], ng[good], pos[vv[h[good]]], normal[vv[h[good]]])
-        val[h[good]] = contrib[good] * vis
+    p_lt = cos_v / np.pi * np.abs(dot(g.ng, to_v)) / (d2 * np.sqrt(d2))
+    val[h] = np.where(p_cam > 0, f * cos_y * con.factor / np.maximum(p_cam + p_lt, 1e-300), 0.0)
     return val
 
 

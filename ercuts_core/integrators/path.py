@@ -292,3 +292,25 @@ def next_event(scene, surf, wo: NDArray, bsdf: Bsdf, rng: np.random.Generator, m
             vis[b] = tracer.visible(surf.p[t[b]], surf.ng[t[b]], target[b], None)
         out[t[vis]] = contrib[t[vis]]
     return out
+
+
+def emission_found(scene, o: NDArray, d: NDArray, pdf: NDArray, delta: NDArray, surf) -> NDArray:
+    """(N, 3) the emission that BSDF-sampled rays (o, d) find — the world on a miss, an
+    emissive triangle at the hit ``surf`` — weighted by the power heuristic against
+    :func:`next_event`'s light sample (weight 1 after a delta lobe) [Veach 1997 §9.2]: the
+    BSDF half of the MIS estimate of the direct light at the rays' origins. ``pdf`` (N,) the
+    rays' solid-angle densities, ``delta`` (N,) bool."""
+    lights = scene.lights
+    out = np.zeros((len(d), 3))
+    miss = ~surf.valid
+    if lights.env_light >= 0 and miss.any():
+        w = power_heuristic(pdf[miss], lights.pdf_illuminate_env(d[miss]))
+        out[miss] = lights.env_radiance(d[miss]) * np.where(delta[miss], 1.0, w)[:, None]
+    if len(lights.emissive_tris) and surf.valid.any():
+        Le = scene.emission(surf)
+        em = np.flatnonzero(surf.valid & (Le.max(axis=1) > 0))
+        if len(em):
+            pdf_l = lights.pdf_illuminate_tri(o[em], surf.prim[em], surf.p[em], surf.ng[em])
+            w = np.where(delta[em], 1.0, power_heuristic(pdf[em], pdf_l))
+            out[em] = Le[em] * w[:, None]
+    return out

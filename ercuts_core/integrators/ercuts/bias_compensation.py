@@ -33,11 +33,15 @@ from numpy.typing import NDArray
 
 from ...scene import BuiltScene
 from ...vecmath import dot
+from ..path import emission_found
 from .vpl import clamp_factor
 
 #: Levels of the recursion (level 1: the receivers' own clamped light; level k: the clamped
 #: light of the surfaces that compensate level k − 1).
-COMPENSATION_DEPTH = 3
+COMPENSATION_DEPTH = 64
+#: Levels after which Russian roulette ends the recursion's paths (survival probability the
+#: path's throughput, which the weights w < 1 and the reflectances keep shrinking).
+COMPENSATION_RR_DEPTH = 3
 
 #: BSDF rays of the compensation per iteration: each shading point sends
 #: :func:`compensation_rays` = COMPENSATION_RAYS // points of them (1 … COMPENSATION_MAX_RAYS),
@@ -73,7 +77,8 @@ def compensation_rays(points: int) -> int:
 
 def compensate(scene: BuiltScene, gmax: float, p: NDArray, ng: NDArray, ns: NDArray, wo: NDArray,
                mat: NDArray, rng: np.random.Generator, radiance_at: RadianceAt,
-               depth: int = COMPENSATION_DEPTH, rays: int = 1) -> tuple[NDArray, NDArray]:
+               depth: int = COMPENSATION_DEPTH, rays: int = 1, emission_mis: bool = False,
+               rr_depth: int = COMPENSATION_RR_DEPTH) -> tuple[NDArray, NDArray]:
     """ΔL at receivers (module docstring): the mean of ``rays`` paths per receiver, one BSDF
     sample per path and level.
 
@@ -81,13 +86,20 @@ def compensate(scene: BuiltScene, gmax: float, p: NDArray, ng: NDArray, ns: NDAr
         p, ng, ns, wo: (N, 3) receivers: position [m], normals flipped toward wo, unit
             direction to the viewer; mat: (N,) shading keys.
         radiance_at: the clamped estimator of L_o at the surfaces found (:data:`RadianceAt`).
+        emission_mis: ``radiance_at``'s direct light is next-event estimation weighted by MIS
+            against BSDF sampling (:func:`~ercuts_core.integrators.path.next_event`): the
+            BSDF sample drawn at every surface found then also collects the emission it
+            meets, at any distance, with the other weight
+            (:func:`~ercuts_core.integrators.path.emission_found`) — one more BSDF sample at
+            the last level's surfaces.
     Returns:
         (N, 3) ΔL [W m⁻² sr⁻¹, the image's units], and (N,) bool the receivers whose first
         sample found a surface with w > 0 on any of their paths.
     """
     if rays > 1:
         rep = [np.repeat(a, rays, axis=0) for a in (p, ng, ns, wo, mat)]
-        out, near = compensate(scene, gmax, *rep, rng, radiance_at, depth)
+        out, near = compensate(scene, gmax, *rep, rng, radiance_at, depth, emission_mis=emission_mis,
+                               rr_depth=rr_depth)
         return out.reshape(-1, rays, 3).mean(axis=1), near.reshape(-1, rays).any(axis=1)
     n = len(p)
     out = np.zeros((n, 3))
@@ -97,15 +109,23 @@ def compensate(scene: BuiltScene, gmax: float, p: NDArray, ng: NDArray, ns: NDAr
     idx, beta = np.arange(n), np.ones((n, 3))
     t_max = reach(gmax)
     bsdf = None                             # of the level's points when already evaluated
-    for level in range(depth):
+    for level in range(depth + 1):
+        collect = emission_mis and level > 0   # the surfaces found: their direct light's BSDF half
+        if level == depth and not collect:
+            break
         bsdf = scene.bsdf(mat, ns, ng, p) if bsdf is None else bsdf
         bs = bsdf.sample(wo, rng.random((len(idx), 3)))
-        go = np.flatnonzero(bs.valid & ~bs.is_delta & (bs.weight.max(axis=1) > 0))
+        go = np.flatnonzero(bs.valid & (bs.weight.max(axis=1) > 0) & (collect | ~bs.is_delta))
         if len(go) == 0:
             break
         wi = bs.wi[go]
-        surf = scene.intersect(scene.tracer.offset(p[go], ng[go], wi), wi, t_max)
-        h = np.flatnonzero(surf.valid)
+        surf = scene.intersect(scene.tracer.offset(p[go], ng[go], wi), wi, np.inf if collect else t_max)
+        if collect:
+            le = emission_found(scene, p[go], wi, bs.pdf[go], bs.is_delta[go], surf)
+            np.add.at(out, idx[go], beta[go] * bs.weight[go] * le)
+        if level == depth:
+            break
+        h = np.flatnonzero(surf.valid & (surf.t < t_max) & ~bs.is_delta[go])
         y = surf.subset(h)
         wo_y = -wi[h]
         sign = np.where(dot(y.ng, wo_y) < 0.0, -1.0, 1.0)[:, None]
@@ -116,6 +136,9 @@ def compensate(scene: BuiltScene, gmax: float, p: NDArray, ng: NDArray, ns: NDAr
             bsdf = scene.bsdf(y.mat, ns_y, ng_y, y.p)
             w[bsdf.is_specular_or_glass] = 0.0
         b = beta[go[h]] * bs.weight[go[h]] * w[:, None]
+        if level + 1 >= rr_depth:          # Russian roulette: unbiased, however deep
+            q = np.minimum(1.0, b.max(axis=1))
+            b = np.where((rng.random(len(b)) < q)[:, None], b / np.maximum(q, 1e-300)[:, None], 0.0)
         live = np.flatnonzero(b.max(axis=1) > 0.0)
         if len(live) == 0:
             break

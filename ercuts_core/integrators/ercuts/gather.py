@@ -224,11 +224,11 @@ class Gather:
                 bsdf = scene.bsdf(mat, ns, ng, p)
                 L = sweep.radiance(self.shading_points_at(p, ng, ns, wo, mat, bsdf), rng)
                 if not scene.lights.empty:
-                    L = L + next_event(scene, SimpleNamespace(p=p, ns=ns, ng=ng), wo, bsdf, rng, mis=False)
+                    L = L + next_event(scene, SimpleNamespace(p=p, ns=ns, ng=ng), wo, bsdf, rng)
                 return L
 
             got, hit = compensate(scene, gmax, g.p[idx], g.ng[idx], g.ns[idx], g.wo[idx], g.mat[idx], rng,
-                                  radiance_at, rays=m)
+                                  radiance_at, rays=m, emission_mis=True)
             out[idx] = got if g.weight is None else got * g.weight[idx]
             near += int(np.count_nonzero(hit))
             f = (start + len(idx)) / len(pts)

@@ -145,7 +145,7 @@ def test_the_recursion_follows_the_light_between_close_plates():
     removed light is L0·ρW/(1 − ρW) (ρW = 0.70: 2.39·L0). Russian roulette after
     :data:`COMPENSATION_RR_DEPTH` levels keeps every level; the recursion stopped after three
     (stop 44's rule) gives L0·Σ_{k≤3}(ρW)^k = 1.55·L0 — in the Cornell box's 1 cm gap above
-    its lamp that rule returned 4.3 of the clamp's 6.1 (24 seeds, 64×48), now 6.0."""
+    its lamp that rule returned 4.3 of the clamp's 6.1 (24 seeds, 64×48), now 5.95."""
     scene, n = plates(False), 100_000
     rw = PLATE_RHO * plate_share()
 

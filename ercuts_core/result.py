@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 #: ``stats`` keys grouped under "vpl" and "cuts" in :meth:`RenderResult.report_dict`.
 VPL_KEYS = ("P", "P_all", "seed_paths", "chains", "chain_steps", "chain_states", "vpls_before_merge",
             "vpls_after_merge", "vpls", "vpls_emitter", "vpls_unlit_fallback", "e1_samples",
-            "vpl_energy_ratio", "nan_acceptances")
+            "vpls_kept_for_time_limit", "vpl_energy_ratio", "nan_acceptances")
 CUT_KEYS = ("cut_size_mean", "cut_size_max", "cut_bound_unmet", "max_error_for_time_limit", "cut_cap_for_time_limit",
             "paced_points_for_time_limit", "gather_shadow_rays",
             "clamped_energy", "compensated_points", "compensated_energy", "compensation_seconds", "compensation_rays",

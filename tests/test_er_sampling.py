@@ -207,3 +207,33 @@ def test_interrupt_abandons_the_step_without_its_deposits(scene, pools):
                      np.random.default_rng(3), interrupt=interrupt)
     assert len(polls) == 6 and polls == sorted(polls) and polls[-1] < 0.3
     assert 0 < res.steps_done < 3 and res.count.sum() == 200 * res.steps_done
+
+
+def test_thinned_vpls_keep_the_energy_in_expectation():
+    """A paced iteration that cannot give every VPL ``vpl.PACED_E1_FLOOR`` Ê1 samples keeps a
+    random share of them (``vpl.thin_vpls``): each record survives with probability q and
+    then carries 1/q of its deposits and colour, so Σ count (the image energy in units of
+    e_d) and Σ colour are kept in expectation — within 4 standard errors over 200 draws —
+    and about q·V records remain; q ≥ 1 keeps the records as they are."""
+    from ercuts_core.integrators.ercuts.er_sampling import ChainResult
+    from ercuts_core.integrators.ercuts.vpl import thin_vpls
+
+    rng = np.random.default_rng(3)
+    V = 2000
+    count = rng.integers(1, 20, V).astype(np.float64)
+    color = rng.random((V, 3)) * count[:, None]
+    chains = ChainResult(rng.random((V, 3)), np.tile([0.0, 1.0, 0.0], (V, 1)), count, color,
+                         rng.random((V, 2)), np.zeros(4), np.zeros(4), np.zeros(4), V, 10)
+    assert thin_vpls(chains, 1.0, rng) is chains
+    q = 0.3
+    draws = [thin_vpls(chains, q, rng) for _ in range(200)]
+    sums = np.array([d.count.sum() for d in draws])
+    colors = np.array([d.color_sum.sum(axis=0) for d in draws])
+    kept = np.array([(d.count > 0).sum() for d in draws])
+    assert abs(sums.mean() - count.sum()) < 4 * sums.std(ddof=1) / np.sqrt(len(sums))
+    se = colors.std(axis=0, ddof=1) / np.sqrt(len(colors))
+    assert (np.abs(colors.mean(axis=0) - color.sum(axis=0)) < 4 * se).all()
+    assert abs(kept.mean() - q * V) < 4 * np.sqrt(q * (1 - q) * V / len(kept))
+    d = draws[0]
+    on = d.count > 0
+    assert np.allclose(d.count[on], count[on] / q) and np.allclose(d.color_sum[on], color[on] / q)

@@ -127,8 +127,8 @@ from .progressive import (iteration_end, iteration_settings, iteration_target, m
 from .paths import PathBatch
 from .seeding import seed_paths
 from . import warm_up
-from .vpl import (PIXEL_SAMPLE_RATE, SPECULAR_BOUNCES, GBuffer, build_gbuffer, first_hits_only,
-                  follow_specular, g_clamp, make_vpls)
+from .vpl import (PACED_E1_FLOOR, PIXEL_SAMPLE_RATE, SPECULAR_BOUNCES, GBuffer, build_gbuffer,
+                  first_hits_only, follow_specular, g_clamp, make_vpls, thin_vpls)
 
 #: The gather shades what perfect mirrors show and smooth glass lets through with the VPLs
 #: (algorithm.md §G.3, :func:`~.vpl.follow_specular`); False = the ablation: every path with
@@ -148,6 +148,9 @@ PILOT_LIGHT_SAMPLES: int | None = 2
 #: for the first paced iteration; later ones use the rate the render measured (samples per
 #: VPL × VPLs per second of the VPL phase: 2.3–2.4 × 10⁶ on the directly lit scene, 160×120).
 _E1_RATE = 1.0e6
+#: Smallest share of the VPLs a paced iteration keeps to give each :data:`~.vpl.PACED_E1_FLOOR`
+#: Ê1 samples (:func:`~.vpl.thin_vpls`); below it the samples per VPL fall instead.
+MIN_VPL_SHARE = 1.0 / 16
 #: A paced iteration traces seed paths for at most this share of the ER chains' time share
 #: (:meth:`ErcutsIntegrator._seed_deadline`): 81 920 chains need ≈ 330 000 seed pixels (38 s
 #: at 1280×720), which at 640×480 in 120 s left the chains 12 of their 21 steps.
@@ -541,13 +544,21 @@ class ErcutsIntegrator:
 
     # ------------------------------------------------------------------ phase 3
     def _make_vpls(self, g: GBuffer, chains, e_d: float, gmax: float, rng):
-        """VPLs at the chains' x2, normalised with ``e1_samples`` light-traced samples each
-        (fewer when the phase's time share asks for it)."""
+        """VPLs at the chains' x2, normalised with ``e1_samples`` light-traced samples each.
+        A paced iteration fits them into the phase's time share: by a random share of the
+        VPLs (``stats['vpls_kept_for_time_limit']``, :func:`~.vpl.thin_vpls`) while that
+        leaves :data:`~.vpl.PACED_E1_FLOOR` samples each, and below it by fewer samples."""
         s, stats, sched = self.settings, self.stats, self.schedule
         n_e1, n_v = s.e1_samples, max(int((chains.count > 0).sum()), 1)
         if sched.paced:
             budget = max(sched.deadline("vpl") - time.perf_counter(), 0.0)
             rate = getattr(self, "e1_rate", None) or _E1_RATE / (1.0 + PIXEL_SAMPLE_RATE)
+            floor = min(n_e1, PACED_E1_FLOOR)
+            keep = max(budget * rate / n_v / floor, MIN_VPL_SHARE)
+            if keep < 1.0:          # fewer VPLs rather than fewer samples each
+                chains = thin_vpls(chains, keep, rng)
+                n_v = max(int((chains.count > 0).sum()), 1)
+                stats["vpls_kept_for_time_limit"] = keep
             n_e1 = int(min(n_e1, max(16, budget * rate / n_v)))
         stats["e1_samples"] = n_e1
         label = f"| {stats['vpls_after_merge']} VPLs x {n_e1} E1 samples"

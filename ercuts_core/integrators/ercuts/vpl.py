@@ -669,6 +669,26 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
     return e1
 
 
+#: Fewest Ê1 samples per VPL a paced iteration normalises with; when its time holds fewer,
+#: it keeps a random share of the VPLs instead (:func:`thin_vpls`). Directly lit scene,
+#: 160×120, one iteration, seeds 0–2, relMSE of the indirect pass: 3.1e-4 / 3.5e-3 / 2.6e-4
+#: with 64 samples (1/Ê1's heavy tail), 8.8 / 7.7 / 8.8e-5 with 128, 8.1 / 6.9 / 8.5e-5 with
+#: 192, 7.7 / 6.9 / 8.3e-5 with 256 (the default), 7.5 / 6.9 / 7.9e-5 with 4096.
+PACED_E1_FLOOR = 128
+
+
+def thin_vpls(chains: ChainResult, keep: float, rng: np.random.Generator) -> ChainResult:
+    """The chains' VPL records with each kept with probability ``keep`` (Russian roulette)
+    and a kept one's deposits weighted by 1/keep: the VPL image's expectation is unchanged
+    (each record's energy k_v·e_d is kept in expectation) with fewer VPLs to normalise."""
+    if keep >= 1.0:
+        return chains
+    kept = rng.random(len(chains.count)) < keep
+    scale = np.where(kept, 1.0 / keep, 0.0)
+    return dataclasses.replace(chains, count=chains.count * scale,
+                               color_sum=chains.color_sum * scale[:, None])
+
+
 def make_vpls(scene: BuiltScene, g: GBuffer, chains: ChainResult, e_d: float, gmax: float,
               n_samples: int, rng: np.random.Generator, chunk: int = 1 << 18,
               keep_going=None, clear_receivers: bool = True) -> VPLSet:

@@ -29,8 +29,9 @@ by Russian roulette after :data:`COMPENSATION_RR_DEPTH` levels (at most
 :data:`COMPENSATION_DEPTH`), so it keeps the light that bounces many times inside such a
 gap; stopping after three levels returned 4.3 of the 6.1 the clamp removed in the Cornell
 box (64×48, 24 seeds; now 5.95). With the compensation the VPLs are normalised by their
-*unclamped* image energy Ê1 (:func:`.vpl.make_vpls`), so clamped gather + compensation is the unclamped VPL image in
-expectation: the image's energy is no longer moved from the edges onto the open walls.
+*unclamped* image energy Ê1 (:func:`.vpl.make_vpls`), so clamped gather + compensation is
+the unclamped VPL image in expectation: the image's energy is no longer moved from the edges
+onto the open walls.
 """
 from __future__ import annotations
 

@@ -123,8 +123,8 @@ def shrunk_settings(settings: RenderSettings, k: int, target: int | None, clock,
     normalisation then keeps its samples per VPL: cut to the phase's share instead, Ê1 fell
     to 56 samples per VPL in the last, 7.3 s iteration of the directly lit scene at 60 s
     (160×120, seed 0), whose image had 10× the error of the 13 s iterations before it
-    (relMSE 1.5e-3 against 1.5e-4) and doubled the render's (1.0e-4 against 4.1e-5 from the
-    four full ones). The first iteration, whose cost is unknown, and renders with an
+    (relMSE 1.5e-3 against 1.5e-4) and doubled the render's (1.0e-4 against ≈ 3.8e-5 from
+    the four full ones). The first iteration, whose cost is unknown, and renders with an
     iteration target are paced by their phases' shares alone."""
     if k == 0 or target is not None or clock.deadline is None or not durations:
         return settings

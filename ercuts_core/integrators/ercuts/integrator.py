@@ -172,6 +172,8 @@ class ErcutsIntegrator:
         self.scene = scene
         self.settings = settings
         self.memory = memory or plan(scene.camera.window.n_pixels, scene.desc.mesh.n_triangles, settings)
+        #: Ê1 samples per second measured by the render's last complete VPL phase (None: not yet).
+        self.e1_rate: float | None = None
 
     # ------------------------------------------------------------------ driver
     def render(self, film: Film, clock: Clock, timings: dict, stats: dict) -> None:
@@ -552,7 +554,7 @@ class ErcutsIntegrator:
         n_e1, n_v = s.e1_samples, max(int((chains.count > 0).sum()), 1)
         if sched.paced:
             budget = max(sched.deadline("vpl") - time.perf_counter(), 0.0)
-            rate = getattr(self, "e1_rate", None) or _E1_RATE / (1.0 + PIXEL_SAMPLE_RATE)
+            rate = self.e1_rate or _E1_RATE / (1.0 + PIXEL_SAMPLE_RATE)
             floor = min(n_e1, PACED_E1_FLOOR)
             keep = max(budget * rate / n_v / floor, MIN_VPL_SHARE)
             if keep < 1.0:          # fewer VPLs rather than fewer samples each

@@ -62,7 +62,8 @@ def test_probe_estimates_one_pass_variance_from_a_subsample():
     assert v.error(ref) == pytest.approx(_expected(sigma, ref, 2), rel=0.05)
 
 
-def _gather_and_rival(sigma_gather: float, sigma_direct: float, fills: bool, passes_asked: int = 2):
+def _gather_and_rival(sigma_gather: float, sigma_direct: float, fills: bool, passes_asked: int = 2,
+                      paced: bool = True):
     """A mock gather (passes of 1 s, per-point noise ``sigma_gather``, probe included) and a
     direct rival (passes of 1 s, noise ``sigma_direct``, 8 passes so far) over Q pixels, one
     point each; the iteration has 6 s left."""
@@ -93,7 +94,7 @@ def _gather_and_rival(sigma_gather: float, sigma_direct: float, fills: bool, pas
 
     rival = DirectRival(one_more, direct, 1.0)
     sweep = SimpleNamespace(pts_all=np.arange(Q), run=run, probe=probe)
-    schedule = SimpleNamespace(fills_time=lambda: fills, remaining=lambda: state["left"],
+    schedule = SimpleNamespace(fills_time=lambda: fills, paced=paced, remaining=lambda: state["left"],
                                clock=SimpleNamespace(cancelled=False))
     gather = SimpleNamespace(settings=SimpleNamespace(stochastic_passes=passes_asked),
                              g=SimpleNamespace(pixel=np.arange(Q), samples=1), interp=None)
@@ -118,10 +119,19 @@ def test_direct_passes_take_the_second_gather_pass_when_they_are_noisier():
     assert passes >= 5 and rival.extra == 0
 
 
-def test_no_probe_and_no_competition_while_later_iterations_follow():
-    """An iteration that does not fill its time makes exactly ``stochastic_passes`` gather
-    passes, with no probe and no direct passes taken from it, however noisy those are."""
+def test_a_paced_iteration_that_later_ones_follow_lends_its_second_pass_too():
+    """A paced iteration that does not fill the render's time (later iterations follow) also
+    probes, and a far noisier direct estimate takes the time of the gather's second pass and no
+    more (since stop 46: the direct passes are pooled over the iterations, so none is wasted;
+    with no bound they took all of a 60 s render of the directly lit scene, one iteration of
+    1 183 direct passes, relMSE 3.0e-5 → 8.8e-5, the VPL set's variance left unaveraged); a
+    noisier gather makes its ``stochastic_passes`` and no more. Unpaced, it makes exactly
+    those passes, with no probe and no direct pass taken from it, however noisy those are."""
     passes, rival, state = _gather_and_rival(sigma_gather=0.05, sigma_direct=1.0, fills=False)
+    assert state["probe"] == 1 and rival.extra == 1 and passes == 1   # one 1 s pass for one 1 s pass
+    passes, rival, state = _gather_and_rival(sigma_gather=1.0, sigma_direct=0.05, fills=False)
+    assert state["probe"] == 1 and rival.extra == 0 and passes == 2
+    passes, rival, state = _gather_and_rival(sigma_gather=0.05, sigma_direct=1.0, fills=False, paced=False)
     assert passes == 2 and rival.extra == 0 and state["probe"] == 0
 
 

@@ -287,7 +287,9 @@ class BDPTIntegrator(Integrator):
         paths: 'all', or 'direct_and_late_delta': only the paths that ERCUTS's gather does
             not render when it follows the camera through mirrors and smooth glass (as
             :class:`~.path.PathIntegrator`'s set of that name; the class of a path, not of
-            a strategy, so the MIS weights stay those of all strategies).
+            a strategy, so the MIS weights stay those of all strategies); or 'late_delta',
+            those of them with a late event (caustics, a lamp behind glass: light tracing's
+            and the connections' paths), added without coverage (:attr:`light_only`).
     """
 
     def __init__(self, scene: BuiltScene, settings: RenderSettings, *,
@@ -296,10 +298,13 @@ class BDPTIntegrator(Integrator):
                  on_connections: "Callable[[Subpaths, Subpaths, list[Connection]], None] | None" = None,
                  paths: str = "all"):
         super().__init__(scene, settings)
-        if paths not in ("all", "direct_and_late_delta"):
+        if paths not in ("all", "direct_and_late_delta", "late_delta"):
             raise ValueError(f"unknown path set {paths!r}")
-        self.traced_only = paths == "direct_and_late_delta"
-        if self.traced_only and on_connections is not None:
+        self.paths = paths
+        #: the passes add light only (no coverage, no first-hit AOVs): 'late_delta' renders a
+        #: part of the image that a path tracer's passes over the same film complete
+        self.light_only = paths == "late_delta"
+        if paths != "all" and on_connections is not None:
             raise ValueError("on_connections records every path: paths must be 'all'")
         lights = scene.lights
         self.mis_power = float(mis_power)
@@ -362,21 +367,25 @@ class BDPTIntegrator(Integrator):
         # Execute all connection strategies, one group of (s, t) pairs at a time
         with np.errstate(over="ignore", under="ignore"):
             for lane, s, t in self._rows_s0(cam).chunks(self.max_rows):
+                lane, s, t = self._late_rows(lane, s, t)
                 self._accumulate(L, pix, lane, s, t, *self._hit_emitter(cam, lane, s, t))
             for lane, s, t in self._rows_s1(cam).chunks(self.max_rows):
+                lane, s, t = self._late_rows(lane, s, t)
                 keep, c, sample = self._connect_light(cam, lane, s, t, rng, u_nee)
                 self._accumulate(L, pix, lane, s, t, keep, c, sample)
             for lane, s, t in self._rows_general(cam, lig).chunks(self.max_rows):
+                lane, s, t = self._late_rows(lane, s, t)
                 self._accumulate(L, pix, lane, s, t,
                                  *self._connect_vertices(cam, lig, no_s0, lane, s, t))
             if not self.camera.is_delta_direction:
                 for lane, s, t in self._rows_t1(lig).chunks(self.max_rows):
-                    self._connect_camera(film, lig, no_s0, lane, s, t, rng)
-        L += cam.lights_seen                                  # E S⁺ L: traced in every set
+                    self._connect_camera(film, lig, no_s0, *self._late_rows(lane, s, t), rng)
+        if not self.light_only:     # E S⁺ L: in every set but the late one (a prefix only)
+            L += cam.lights_seen
         seen = float(luminance(cam.lights_seen[2]).sum())     # (two or more S: indirect)
         self.delta_indirect += seen
         self.traced_indirect += seen
-        film.add_samples(pix, L.sum(axis=0), alpha, parts=L)
+        film.add_samples(pix, L.sum(axis=0), 0.0 * alpha if self.light_only else alpha, parts=L)
         if self.on_connections is not None:
             self.on_connections(cam, lig, self._pending)
 
@@ -385,9 +394,9 @@ class BDPTIntegrator(Integrator):
         """L[class, lane[keep]] += c, class = path_class(s + t − 2) (scattering vertices); rows
         of one lane may repeat across strategies."""
         lane, s, t = lane[keep], s[keep], t[keep]           # c: the kept rows' contributions
-        traced = self._count_delta(lane, s, t, c)
-        if self.traced_only:
-            lane, s, t, c = lane[traced], s[traced], t[traced], c[traced]
+        kept = self._in_set(*self._count_delta(lane, s, t, c))
+        if kept is not None:
+            lane, s, t, c = lane[kept], s[kept], t[kept], c[kept]
         if len(lane) == 0:
             return
         if self.on_connections is not None:
@@ -399,19 +408,33 @@ class BDPTIntegrator(Integrator):
         if self.strategy_images is not None:
             self._record_strategies(s, t, pix[lane], c)
 
-    def _count_delta(self, lane: NDArray, s: NDArray, t: NDArray, c: NDArray) -> NDArray:
+    def _count_delta(self, lane: NDArray, s: NDArray, t: NDArray, c: NDArray) -> tuple[NDArray, NDArray]:
         """Classify connection rows (lane, s, t) by their path and count their energies Y(c)
         (one pass's units). A path's *prefix* is its run of scattering vertices on mirrors
         and glass from the camera on (camera vertices 1 … t − 1, then light vertices s − 1,
-        s − 2, …; :func:`_delta_counts`), x_d the vertex after it; returns (R,) bool, the path
-        is *traced* — it has a delta event outside the prefix, the vertex after x_d on a mirror
-        or glass, or at most one scattering vertex outside the prefix: what
-        ERCUTS's direct passes render when its gather follows the camera through mirrors and
-        glass (``PathIntegrator(paths='direct_and_late_delta')``). Of the rows with
+        s − 2, …; :func:`_delta_counts`), x_d the vertex after it; returns two (R,) bool: the
+        path is *traced* — it is *late* (the second array: a delta event outside the prefix,
+        or the vertex after x_d on a mirror or glass), or it has at most one scattering vertex
+        outside the prefix: what ERCUTS's direct passes render when its gather follows the
+        camera through mirrors and glass (``PathIntegrator(paths='direct_and_late_delta')``,
+        the late ones ``'late_delta'``). Of the rows with
         s + t − 2 ≥ 2 scattering vertices, those with a delta event — at a camera vertex
         1 … t − 2 or a light vertex 1 … s − 2 (a connection vertex is never one) — add to
         :attr:`delta_indirect`; those or the ones whose x1 or x2 is on a mirror or glass to
         :attr:`outside_indirect`; the traced ones to :attr:`traced_indirect`."""
+        traced, late, scatter, total, outside = self._classify(lane, s, t)
+        ind = np.flatnonzero(scatter >= 2)
+        if len(ind):
+            y = luminance(c[ind])
+            self.delta_indirect += float(y[total[ind] > 0].sum())
+            self.outside_indirect += float(y[outside[ind]].sum())
+            self.traced_indirect += float(y[traced[ind]].sum())
+        return traced, late
+
+    def _classify(self, lane: NDArray, s: NDArray, t: NDArray) -> tuple[NDArray, ...]:
+        """Per connection row (R,): traced, late (:meth:`_count_delta`), the scattering
+        vertices s + t − 2, the delta events, and outside the ER chains' domain (a delta
+        event, or x1 or x2 on a mirror or glass)."""
         cam_dc, cam_lead, lig_dc, lig_run = self._delta_counts
         scatter = s + t - 2
         cam_sc = np.maximum(np.where(s >= 1, t - 1, t - 2), 0)    # camera scattering vertices
@@ -422,15 +445,26 @@ class BDPTIntegrator(Integrator):
         in_prefix = cam_dc[np.minimum(lead, tc), lane] + np.where(
             m >= 2, lig_dc[sc, lane] - lig_dc[np.maximum(s - m - 1, 0), lane], 0)
         after = self._clear_after_prefix(lane, s, lead + m, cam_sc)
-        traced = (total > in_prefix) | after | (scatter - lead - m <= 1)
-        ind = np.flatnonzero(scatter >= 2)
-        if len(ind):
-            y = luminance(c[ind])
-            delta = total[ind] > 0
-            self.delta_indirect += float(y[delta].sum())
-            self.outside_indirect += float(y[delta | (lead[ind] + m[ind] >= 1) | after[ind]].sum())
-            self.traced_indirect += float(y[traced[ind]].sum())
-        return traced
+        late = (total > in_prefix) | after
+        traced = late | (scatter - lead - m <= 1)
+        return traced, late, scatter, total, (total > 0) | (lead + m >= 1) | after
+
+    def _late_rows(self, lane: NDArray, s: NDArray, t: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        """The rows of late paths alone when the passes render only them (:attr:`light_only`:
+        the others' connections are not made), else all rows."""
+        if not self.light_only:
+            return lane, s, t
+        late = self._classify(lane, s, t)[1]
+        return lane[late], s[late], t[late]
+
+    def _in_set(self, traced: NDArray, late: NDArray) -> NDArray | None:
+        """(R,) bool: the rows of :attr:`paths` (from :meth:`_count_delta`), None for 'all'."""
+        return None if self.paths == "all" else late if self.light_only else traced
+
+    def record_first_hit(self, film: Film, pix: NDArray, keep: NDArray, surf, bsdf) -> None:
+        """First-hit AOVs, unless the passes add light only (:attr:`light_only`)."""
+        if not self.light_only:
+            super().record_first_hit(film, pix, keep, surf, bsdf)
 
     def _clear_after_prefix(self, lane: NDArray, s: NDArray, prefix: NDArray, cam_sc: NDArray) -> NDArray:
         """(R,) the scattering vertex after x_d (the first one after the ``prefix`` (R,)
@@ -951,9 +985,9 @@ class BDPTIntegrator(Integrator):
         vis = self.scene.tracer.visible(p, ng, np.ascontiguousarray(eye), None)
         raster, c, s, t = raster[vis], (c * w[:, None])[vis], s[vis], t[vis]
         lane, eye = lane[vis], eye[vis]
-        traced = self._count_delta(lane, s, t, c / self.window.n_pixels)
-        if self.traced_only:
-            lane, raster, c, s, t = lane[traced], raster[traced], c[traced], s[traced], t[traced]
+        kept = self._in_set(*self._count_delta(lane, s, t, c / self.window.n_pixels))
+        if kept is not None:
+            lane, raster, c, s, t = lane[kept], raster[kept], c[kept], s[kept], t[kept]
         film.add_splats(raster, c, path_class(s + t - 2))
         if self.on_connections is not None:
             self._pending.append(Connection(lane, s, t, luminance(c) / self.window.n_pixels,

@@ -30,7 +30,11 @@ from .base import Integrator
 
 
 #: Which paths :class:`PathIntegrator` adds to the film (see its docstring).
-PATH_SETS = ("all", "direct_and_delta", "delta", "direct_and_late_delta")
+PATH_SETS = ("all", "direct_and_delta", "delta", "direct_and_late_delta", "direct_through_prefix",
+             "late_delta")
+#: The sets classified by the prefix of mirrors and glass from the camera on (class docstring):
+#: 'direct_and_late_delta' is the union of the other two, which are disjoint.
+PREFIX_SETS = ("direct_and_late_delta", "direct_through_prefix", "late_delta")
 #: Most light samples at the first hit (:func:`next_event_stratified`).
 MAX_LIGHT_SAMPLES = 8
 
@@ -54,9 +58,12 @@ class PathIntegrator(Integrator):
     first vertex after it; the set holds the paths with at most one scattering vertex outside
     the prefix (light seen directly, in a mirror or through a window, and direct light at
     x_d), and those with a *late* event: a delta event outside the prefix (caustics, a lamp
-    behind glass) or the vertex after x_d on a mirror or glass (where no VPL can sit). Without
-    delta materials in the scene (``BuiltScene.has_delta``; for the last set, without mirrors
-    and glass, ``has_specular_or_glass``) the last three stop after the first bounce.
+    behind glass) or the vertex after x_d on a mirror or glass (where no VPL can sit). It is
+    the union of two disjoint sets: 'direct_through_prefix', its paths without a late event,
+    and 'late_delta', those with one (ERCUTS renders the first by path tracing, the second
+    by BDPT: :mod:`~.ercuts.late_paths`). Without delta materials in the scene
+    (``BuiltScene.has_delta``; for the last three sets, without mirrors and glass,
+    ``has_specular_or_glass``) these sets stop after the first bounce.
     """
 
     def __init__(self, scene, settings, paths: str = "all", light_samples: int = 1):
@@ -75,7 +82,7 @@ class PathIntegrator(Integrator):
         #: part of a pass's variance, :func:`~.ercuts.balance.light_samples_for`)
         self.light_spread: NDArray | None = None
         self.max_depth = settings.max_depth
-        if paths != "all" and not (scene.has_specular_or_glass if paths == "direct_and_late_delta"
+        if paths != "all" and not (scene.has_specular_or_glass if paths in PREFIX_SETS
                                    else scene.has_delta):
             self.max_depth = min(self.max_depth, 1)
 
@@ -100,6 +107,10 @@ class PathIntegrator(Integrator):
             return seen
         if self.paths == "direct_and_late_delta":
             return late | (nd <= 1)
+        if self.paths == "direct_through_prefix":
+            return ~late & (nd <= 1)
+        if self.paths == "late_delta":
+            return late
         return seen | (scatter <= 1)
 
     def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator,
@@ -167,7 +178,7 @@ class PathIntegrator(Integrator):
                 self.record_first_hit(film, pix, keep, surf, bsdf)
             if len(idx) == 0:
                 break
-            clear = bsdf.is_specular_or_glass if self.paths == "direct_and_late_delta" else None
+            clear = bsdf.is_specular_or_glass if self.paths in PREFIX_SETS else None
             if clear is not None:       # a VPL cannot sit on the mirror or glass after x_d
                 late = late | (clear & (nd == 1))
             nee = self._counted(depth + 1, seen, late, nd + 1)
@@ -199,9 +210,11 @@ class PathIntegrator(Integrator):
             prefix = clear & (nd == 0) if clear is not None else np.zeros(len(nd), bool)
             late = (late | (bs.is_delta & ~prefix))[keep]
             nd = (nd + ~prefix)[keep]
-            if clear is not None and not scene.has_delta:
-                # without delta lobes nothing after x_(d+1) can make a path late: stop it
-                go = np.flatnonzero(late | (nd < 2))
+            if self.paths == "direct_through_prefix" or (clear is not None and not scene.has_delta):
+                # nothing after x_(d+1) counts unless the path is late, which without delta
+                # lobes nothing after it can make it (and late paths are not this set's)
+                go = np.flatnonzero(~late & (nd < 2) if self.paths == "direct_through_prefix"
+                                    else late | (nd < 2))
                 surf, beta, idx, keep = surf.subset(go), beta[go], idx[go], keep[go]
                 late, nd = late[go], nd[go]
             seen = seen[keep] | bs.is_delta[keep]

@@ -53,6 +53,10 @@ PASS_START = 0.1
 #: A direct-light pass takes spare time only if the iteration's time left holds this many of
 #: its durations (it is not cut short: a pass of the direct film must be complete).
 RIVAL_START = 1.5
+#: The direct-light passes compete for the time of the gather's second pass in every paced
+#: iteration (False: only in one that fills the render's time, as before stop 46); in one that
+#: later iterations follow they may take that pass's time and no more.
+RIVAL_IN_EVERY_PACED = True
 #: Receivers per chunk of the clamp's bias compensation (:meth:`Gather._compensation`; progress
 #: and Esc between chunks), and the seed salt of its draws.
 COMPENSATION_CHUNK = 1 << 14
@@ -249,9 +253,10 @@ class Gather:
         holds them when the iteration fills its time, asked again after every pass: once the
         passes are done, time that no later iteration would use goes into more passes — or,
         pass by pass, into more direct-light passes of ``rival`` when that lowers the image's
-        error more per second, :mod:`.balance`; in an iteration that fills its time the rival
-        competes from the first pass on, after a variance probe, :meth:`_probe`), each point's
-        estimate the mean of its passes.
+        error more per second, :mod:`.balance`; in a paced iteration the rival competes from
+        the first pass on, after a variance probe, :meth:`_probe` — in one that later
+        iterations follow, for the second pass's time and no more), each point's estimate the
+        mean of its passes.
         A pass the iteration's time cuts short keeps the points it reached (spread over
         the image by :func:`spread_order`): each pass is an unbiased estimate per point, so a
         mean over 1 or 2 passes is too. Returns the mean (2, Q, 3) and the passes made
@@ -261,15 +266,24 @@ class Gather:
         total, count, passes = L.copy(), np.ones(len(self.g.pixel)), 1.0
         spread = PassVariance(n_pixels)
         spread.add(_pixel_luminance(L, n_pixels, S))
-        early = rival is not None and schedule.fills_time() and self._probe(sweep, L, spread)
+        fills = schedule.fills_time()
+        early = rival is not None and (schedule.paced if RIVAL_IN_EVERY_PACED else fills) \
+            and self._probe(sweep, L, spread)
+        # direct passes the rival may take: in an iteration later ones follow, as many as fit
+        # in the time of the gather's second pass
+        budget = np.inf if fills or rival is None else max(1, int(round(t_pass / max(rival.seconds, 1e-9))))
+        lent = 0
         while (passes < s.stochastic_passes or schedule.fills_time()) and not schedule.clock.cancelled \
                 and schedule.remaining() > PASS_START * t_pass:
             if rival is not None and (passes >= s.stochastic_passes or early) \
                     and schedule.remaining() > RIVAL_START * rival.seconds:
                 ref = spread.mean() + rival.variance.mean()
                 if rival.gain(ref) > spread.gain(ref, t_pass):
+                    if lent >= budget:          # the second pass's time is spent: end here
+                        break
                     if not rival.step():
                         break
+                    lent += 1
                     continue
             t0 = time.perf_counter()
             L2, _, done_pt2, done2 = sweep.run(int(passes), lambda parts, c: None)

@@ -116,6 +116,7 @@ from .balance import DirectRival, PassVariance, light_samples_for, passes_at_equ
 from .bias_compensation import compensates
 from .er_sampling import chain_starts, run_chains
 from .gather import Gather, Gathered, per_pixel, per_pixel_parts
+from .late_paths import direct_passes
 from .initialization import (ROUGH_MIN_PASSES, ROUGH_P_ERROR, RoughImage, indirect_energy, p_relative_error,
                              rough_camera, rough_factor, rough_image_energy, scene_with_camera,
                              seeds_from_path_tracer)
@@ -376,7 +377,7 @@ class ErcutsIntegrator:
 
         Returns the passes' (3, h·w, 3) light passes and (h·w,) coverage; the film goes."""
         pilot = PILOT_LIGHT_SAMPLES
-        path = PathIntegrator(self.scene, self.settings, paths=paths, light_samples=pilot or 1)
+        path = direct_passes(self.scene, self.settings, paths, pilot or 1)
         n = self.scene.camera.window.n_pixels
         variance = PassVariance(n)
 

@@ -108,6 +108,18 @@ def _film_parts(integrator, window, seeds, key):
     return np.array(out)
 
 
+def _path_sets(sets, passes: int, key: int) -> dict:
+    """mirror_glass_room at 24×18: PATH's (K, 3) luminance sums per light pass of ``passes``
+    one-sample passes for each path set in ``sets`` (streams ``key``, ``key`` + 1, …), and
+    the built scene under 'scene'."""
+    scene = BuiltScene(mirror_glass_room(24, 18))
+    s = RenderSettings(seed=0)
+    out = {name: _film_parts(PathIntegrator(scene, s, paths=name), scene.camera.window, range(passes), key + i)
+           for i, name in enumerate(sets)}
+    out["scene"] = scene
+    return out
+
+
 def _mean_se(a):
     return a.mean(axis=0), a.std(axis=0, ddof=1) / np.sqrt(len(a))
 
@@ -117,12 +129,10 @@ def test_bdpt_and_path_agree_on_the_traced_and_delta_sets():
     """mirror_glass_room at 24×18: PATH and BDPT restricted to the traced set render the same
     energy, and BDPT's ``delta_indirect``/``traced_indirect`` counters equal PATH's indirect
     light of the 'delta' and 'direct_and_late_delta' sets (4 standard errors)."""
-    scene = BuiltScene(mirror_glass_room(24, 18))
-    s = RenderSettings(seed=0)
-    window = scene.camera.window
     K = 24
-    path_traced = _film_parts(PathIntegrator(scene, s, paths="direct_and_late_delta"), window, range(K), 1)
-    path_delta = _film_parts(PathIntegrator(scene, s, paths="delta"), window, range(K), 2)
+    path = _path_sets(("direct_and_late_delta", "delta"), K, key=1)
+    path_traced, path_delta, scene = path["direct_and_late_delta"], path["delta"], path["scene"]
+    s, window = RenderSettings(seed=0), scene.camera.window
     bdpt = BDPTIntegrator(scene, s, paths="direct_and_late_delta")
     bdpt_traced = _film_parts(bdpt, window, range(K // 3), 3)
     counters = []
@@ -196,15 +206,15 @@ def test_the_traced_set_splits_into_direct_through_the_prefix_and_late_paths():
     through the window: 18.8 ± 1.9 of 25.8 ± 4.5 in 24 passes), so a set that doubled or
     dropped it fails; the direct part (0.36 ± 0.27: the lamp lights only the wall beside it,
     which the camera sees in no mirror) is small."""
-    scene = BuiltScene(mirror_glass_room(24, 18))
-    s = RenderSettings(seed=0)
-    window = scene.camera.window
     K = 24
-    whole = _film_parts(PathIntegrator(scene, s, paths="direct_and_late_delta"), window, range(K), 5)
-    direct = _film_parts(PathIntegrator(scene, s, paths="direct_through_prefix"), window, range(K), 6)
-    late = _film_parts(PathIntegrator(scene, s, paths="late_delta"), window, range(K), 7)
+    path = _path_sets(("direct_and_late_delta", "direct_through_prefix", "late_delta"), K, key=5)
+    whole, direct, late = (path[k] for k in ("direct_and_late_delta", "direct_through_prefix", "late_delta"))
+    scene, s = path["scene"], RenderSettings(seed=0)
     bdpt = BDPTIntegrator(scene, s, paths="late_delta")
-    bdpt_late = _film_parts(bdpt, window, range(K // 3), 8)
+    film = Film(scene.camera.window)
+    bdpt.render_batch(film, np.arange(scene.camera.window.n_pixels), np.random.default_rng(0))
+    assert film.alpha.sum() == 0.0 and not film.aov_sum          # light only: no coverage, no AOVs
+    bdpt_late = _film_parts(bdpt, scene.camera.window, range(K // 3), 8)
     for c in range(3):
         m_w, se_w = _mean_se(whole[:, c])
         m_s, se_s = _mean_se(direct[:, c] + late[:, c])

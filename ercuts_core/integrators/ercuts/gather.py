@@ -279,8 +279,8 @@ class Gather:
                     and schedule.remaining() > RIVAL_START * rival.seconds:
                 ref = spread.mean() + rival.variance.mean()
                 if rival.gain(ref) > spread.gain(ref, t_pass):
-                    if lent >= budget:          # the second pass's time is spent: end here
-                        break
+                    if lent >= budget and not schedule.fills_time():   # the second pass's time
+                        break                                           # is spent: end here
                     if not rival.step():
                         break
                     lent += 1

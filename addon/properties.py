@@ -180,6 +180,12 @@ class ErcutsRenderSettings(bpy.types.PropertyGroup):
         description="Average number of energy-redistribution chains started per pixel",
         default=_default("chains_per_pixel", 0.25), min=0.0, soft_max=16.0,
     )
+    seed_samples: IntProperty(
+        name="Seed Samples",
+        description=("Bidirectional seed paths per pixel the energy-redistribution chains start "
+                     "from (the paper: 1); more lower the indirect light's coarse noise"),
+        default=_default("seed_samples", 4), min=1, soft_max=64,
+    )
     max_chains: IntProperty(
         name="Max Chains",
         description=("Energy-redistribution chains per iteration at most: large renders share "

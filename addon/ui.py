@@ -139,6 +139,7 @@ class ERCUTS_RENDER_PT_ercuts(ErcutsPanel, bpy.types.Panel):
         col.prop(settings, "gather_spacing")
         col = layout.column(align=True)
         col.prop(settings, "chains_per_pixel")
+        col.prop(settings, "seed_samples")
         col.prop(settings, "max_chains")
         col.prop(settings, "chain_length")
         col.prop(settings, "min_chain_length")

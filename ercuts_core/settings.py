@@ -56,6 +56,15 @@ HIGH_RESOLUTION_PIXELS = 800_000
 AUTO_SHADING_SAMPLES = ((HIGH_RESOLUTION_PIXELS, 4),)
 
 
+#: BDPT seed samples per iteration up to which ``seed_samples`` > 1 may add samples
+#: (:meth:`RenderSettings.seed_rate`): seeds cost ≈ 0.33 s per 19 200 samples at 160×120
+#: (directly lit scene: 14.4 → 15.4 s an iteration for 1 → 4 per pixel; S-corridor 42.9 →
+#: 44.1 s for 1 → 4, 60 s for 16), so the budget keeps them under ≈ 2.5 s an iteration
+#: (160×120 takes 4 per pixel, 320×240 1.7); renders from 640×480 up, whose chains already
+#: start from ≥ 3·10⁵ seed samples, keep what one per pixel gives.
+SEED_SAMPLE_BUDGET = 1 << 17
+
+
 @dataclass(frozen=True)
 class RenderSettings:
     """Core render settings.
@@ -91,6 +100,19 @@ class RenderSettings:
             ``iteration_start`` … ``iteration_start + iterations − 1``), so that a frame's
             iterations can be split over several renders and averaged.
         chains_per_pixel: average number of ER chains started per pixel (c).
+        seed_samples: BDPT seed paths per pixel the chains start from (paper §3.2: one; the
+            share of the pixels that seed when ``max_chains`` binds scales with it too). The
+            chains only redistribute their seeds' energy locally, so the seeds' noise is the
+            VPL image's coarse noise, which more chains do not lower. An iteration's
+            gathered light at 160×120, relMSE-weighted variance × seconds over 4–6
+            iterations, for 1 / 4 / 8 / 16 seeds per pixel: S-corridor 0.267 / 0.167 /
+            0.135 / 0.145, door 0.318 / 0.265 / – / –, directly lit 1.21e-3 / 0.95e-3 /
+            1.06e-3 / –; 4× the chains instead: directly lit 2.15e-3 (variance 7.8e-5
+            against 8.4e-5, for 1.9× the time). 4 is the default: at 60 s (seeds 0 / 1)
+            8 made the directly lit scene worse (relMSE 2.9 / 2.3e-5 → 4.0 / 3.3e-5), 4
+            did not (2.6 / 2.5e-5), and 4 took the S-corridor from 4.0 / 4.6e-3 to 2.0 /
+            3.0e-3 and the door from 7.1 / 7.7e-3 to 5.0 / 4.9e-3. The extra samples follow a budget (:data:`SEED_SAMPLE_BUDGET`,
+            :meth:`seed_rate`).
         max_chains: ER chains of ``chain_length`` steps per iteration at most (the default
             leaves renders up to 256×256 at c = 0.25 unchanged); beyond it the chains' mutation
             steps, VPLs and memory follow the budget max_chains × chain_length instead of the
@@ -193,6 +215,7 @@ class RenderSettings:
     iterations: int = 0
     iteration_start: int = 0
     chains_per_pixel: float = 0.25
+    seed_samples: int = 4
     max_chains: int = 16384
     chain_length: int = 100
     min_chain_length: int = 20
@@ -249,9 +272,9 @@ class RenderSettings:
         if self.chains_per_pixel <= 0 or self.chain_length < 1 or self.max_chains < 1 or self.min_chain_length < 1:
             raise ValueError("chains_per_pixel and max_chains must be > 0, chain_length and min_chain_length >= 1")
         if min(self.max_cut_size, self.stochastic_cut_size, self.stochastic_passes, self.stochastic_cut_sharing,
-               self.e1_samples, self.direct_samples) < 1:
+               self.e1_samples, self.direct_samples, self.seed_samples) < 1:
             raise ValueError("max_cut_size, stochastic_cut_size, stochastic_passes, stochastic_cut_sharing, "
-                             "e1_samples and direct_samples must be >= 1")
+                             "e1_samples, direct_samples and seed_samples must be >= 1")
         if self.shading_samples < 0:
             raise ValueError(f"shading_samples must be >= 0 (0 = automatic), got {self.shading_samples}")
         if self.gather_spacing < 0:
@@ -303,6 +326,17 @@ class RenderSettings:
         steps = self.max_chains * self.chain_length
         length = int(min(self.chain_length, max(self.min_chain_length, round(steps / wanted))))
         return min(wanted, steps / length), length
+
+    def seed_rate(self, n_pixels: int) -> float:
+        """Seed paths per pixel of an iteration: q = the share of the pixels that seed
+        (1, or C / (c·n) when the chains' cap binds, :meth:`chain_plan`) times
+        ``seed_samples``, but the extra samples only while they fit in
+        :data:`SEED_SAMPLE_BUDGET`: max(q, min(seed_samples·q, budget / n)) (160×120: 4;
+        from 640×480 up: q, as with one seed sample)."""
+        wanted = self.chains_per_pixel * n_pixels
+        chains, _ = self.chain_plan(n_pixels)
+        q = min(1.0, chains / max(wanted, 1e-12))
+        return max(q, min(self.seed_samples * q, SEED_SAMPLE_BUDGET / max(n_pixels, 1)))
 
     def replace(self, **changes) -> "RenderSettings":
         return dataclasses.replace(self, **changes)

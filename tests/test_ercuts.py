@@ -211,16 +211,18 @@ def test_vpl_energy_check_detects_a_wrong_normalisation(monkeypatch):
 
 
 def test_max_chains_caps_the_chains_and_keeps_the_energy():
-    """With ``max_chains`` below chains_per_pixel · pixels, seeds come from a random quarter
-    of the pixels (energies ×4) and about max_chains chains run (Σ⌊U + e/(N·e_d)⌋ has
+    """With ``max_chains`` below chains_per_pixel · pixels, seeds come from a quarter of the
+    pixel samples (``seed_samples`` per pixel uncapped: a quarter of those, energies ÷ q) and
+    about max_chains chains run (Σ⌊U + e/(N·e_d)⌋ has
     expectation max_chains · seed energy / P, measured within 15 % of it here); the image
     energy stays that of the uncapped render within the 3 % of the energy test above."""
     room = closed_room(48, 36)
     full = render(room, RenderSettings(**FAST, seed=2))
     cap = int(FAST["chains_per_pixel"] * 48 * 36 / 4)
     capped = render(room, RenderSettings(**FAST, seed=2, max_chains=cap, min_chain_length=FAST["chain_length"]))
-    assert capped.stats["seed_pixels"] == 48 * 36 // 4
-    assert full.stats["seed_pixels"] == 48 * 36
+    m = RenderSettings().seed_samples
+    assert capped.stats["seed_pixels"] == m * 48 * 36 // 4
+    assert full.stats["seed_pixels"] == m * 48 * 36
     assert abs(capped.stats["chains"] / cap - 1) < 0.15, capped.stats["chains"]
     e_full, e_cap = (luminance(r.image[..., :3]).mean() for r in (full, capped))
     assert abs(e_cap / e_full - 1) < 0.03, (e_cap, e_full)
@@ -229,7 +231,7 @@ def test_max_chains_caps_the_chains_and_keeps_the_energy():
 def test_beyond_max_chains_the_steps_spread_over_shorter_chains():
     """Beyond ``max_chains`` the chains keep the mutation steps max_chains · chain_length and
     spread them over more, shorter chains, down to ``min_chain_length`` (``chain_plan``):
-    here half the pixels seed twice the capped count of chains of half the length, about
+    here half the pixel samples seed twice the capped count of chains of half the length, about
     that many chains run (within 15 %, as above) and the energy stays the uncapped render's
     within 3 %."""
     room = closed_room(48, 36)
@@ -239,7 +241,7 @@ def test_beyond_max_chains_the_steps_spread_over_shorter_chains():
     assert settings.chain_plan(n) == (2 * cap, FAST["chain_length"] // 2)
     spread = render(room, settings)
     assert spread.stats["chain_length"] == FAST["chain_length"] // 2
-    assert spread.stats["seed_pixels"] == n // 2
+    assert spread.stats["seed_pixels"] == RenderSettings().seed_samples * n // 2
     assert abs(spread.stats["chains"] / (2 * cap) - 1) < 0.15, spread.stats["chains"]
     full = render(room, RenderSettings(**FAST, seed=2))
     e_full, e_spread = (luminance(r.image[..., :3]).mean() for r in (full, spread))
@@ -254,7 +256,7 @@ def test_a_paced_iteration_stops_seeding_at_its_deadline(monkeypatch):
     from ercuts_core.integrators.ercuts import integrator as ercuts_integrator
 
     room = closed_room(64, 48)
-    fast = dict(FAST, seed=4, batch_rays=1 << 15, time_limit=12.0, iterations=1)
+    fast = dict(FAST, seed=4, batch_rays=1 << 15, time_limit=12.0, iterations=1, seed_samples=1)
     full = render(room, RenderSettings(**fast))
     assert full.stats["seed_pixels"] == 64 * 48 and "seed_pixels_planned" not in full.stats
     monkeypatch.setattr(ercuts_integrator, "SEED_SHARE", 0.0)
@@ -275,6 +277,68 @@ def test_the_default_chain_plan_by_resolution():
     assert s.chain_plan(640 * 480) == (0.25 * 640 * 480, 21)
     for n in (1280 * 720, 1920 * 1080):
         assert s.chain_plan(n) == (81920, 20)
+
+
+def test_seed_pixels_sample_every_pixel_rate_times_on_average():
+    """Every pixel ⌊rate⌋ times, a random subset once more; the realised rate is returned
+    (rate 1: each pixel once, as in the paper; below 1: a random subset, at least one)."""
+    from ercuts_core.integrators.ercuts.seeding import seed_pixels
+
+    rng = np.random.default_rng(3)
+    pix, q = seed_pixels(100, 2.3, rng)
+    counts = np.bincount(pix, minlength=100)
+    assert set(counts) == {2, 3} and counts.sum() == 230 and q == pytest.approx(2.3)
+    assert (np.diff(pix) >= 0).all()
+    pix, q = seed_pixels(100, 1.0, rng)
+    np.testing.assert_array_equal(pix, np.arange(100)) and q == 1.0
+    pix, q = seed_pixels(100, 0.3, rng)
+    assert len(np.unique(pix)) == len(pix) == 30 and q == pytest.approx(0.3)
+    assert len(seed_pixels(100, 1e-6, rng)[0]) == 1
+
+
+def test_the_seed_rate_by_resolution():
+    """``seed_samples`` (4) seeds per pixel while they fit in the seed budget (160×120),
+    fewer at 320×240, and from 640×480 up what one seed sample gives (every pixel, or the
+    chains' share of them when the chain cap binds)."""
+    from ercuts_core.settings import SEED_SAMPLE_BUDGET
+
+    s, one = RenderSettings(), RenderSettings(seed_samples=1)
+    assert s.seed_rate(160 * 120) == 4.0 and one.seed_rate(160 * 120) == 1.0
+    assert s.seed_rate(320 * 240) == pytest.approx(SEED_SAMPLE_BUDGET / (320 * 240))
+    for n in (640 * 480, 1280 * 720, 1920 * 1080):
+        assert s.seed_rate(n) == one.seed_rate(n) <= 1.0
+    assert one.seed_rate(1920 * 1080) == pytest.approx(81920 / (0.25 * 1920 * 1080))
+
+
+def test_several_seeds_per_pixel_are_independent_samples():
+    """Σe/q of the seeds estimates the image's indirect energy at any seed rate, and with 4
+    seeds per pixel its variance is a quarter of one seed's: the repeated pixels take
+    independent BDPT samples. 60 draws each: the variance ratio 4·F(59, 59) exceeds 4 × its
+    0.1 % quantile with probability 0.999 (identical repeats would give 1·F); means within
+    4 standard errors."""
+    from scipy.stats import f as f_dist
+
+    from ercuts_core.integrators.ercuts.seeding import seed_paths, seed_pixels
+    from ercuts_core.scene import BuiltScene
+    from ercuts_core.scenes import cornell_box
+    from ercuts_core.validate import sanitize
+
+    scene = BuiltScene(sanitize(cornell_box(16, 12, "mesh")).desc)
+    settings = RenderSettings(max_depth=5)
+    n, K = scene.camera.window.n_pixels, 60
+
+    def energy(rate, seed):
+        rng = np.random.default_rng(seed)
+        pix, q = seed_pixels(n, rate, rng)
+        return seed_paths(scene, settings, rng, pix)[1].sum() / q
+
+    e1 = np.array([energy(1.0, s) for s in range(K)])
+    e4 = np.array([energy(4.0, 1000 + s) for s in range(K)])
+    scene.close()
+    se = np.sqrt(e1.var(ddof=1) / K + e4.var(ddof=1) / K)
+    assert abs(e1.mean() - e4.mean()) < 4 * se, (e1.mean(), e4.mean(), se)
+    ratio = e1.var(ddof=1) / e4.var(ddof=1)
+    assert ratio > 4 * f_dist.ppf(1e-3, K - 1, K - 1), ratio
 
 
 def test_rough_image_follows_a_budget_not_the_pixels():

@@ -126,7 +126,7 @@ from .pacing import Schedule
 from .progressive import (iteration_end, iteration_settings, iteration_target, more_iterations,
                           paced_iteration, shrunk_settings, stratified_jitter)
 from .paths import PathBatch
-from .seeding import seed_paths
+from .seeding import seed_paths, seed_pixels
 from . import warm_up
 from .vpl import (PACED_E1_FLOOR, PIXEL_SAMPLE_RATE, SPECULAR_BOUNCES, GBuffer, build_gbuffer,
                   first_hits_only, follow_specular, g_clamp, make_vpls, thin_vpls)
@@ -478,23 +478,18 @@ class ErcutsIntegrator:
         chains whose states are worth e_d = P/n, n = C · N with C chains of N steps per
         iteration (:meth:`~ercuts_core.settings.RenderSettings.chain_plan`: up to max_chains
         chains of chain_length, beyond that shorter ones): the chains, and so the VPLs,
-        follow a budget, not the pixel count (issue 17). When the cap binds, seeds
-        come from a random fraction q = C / (chains_per_pixel · pixels) of the pixels, their
-        energies divided by q (an unbiased estimate of the image energy: every pixel is in
-        the subset with probability q). Traced in batches of ``memory.seed_pixels`` pixels
+        follow a budget, not the pixel count (issue 17). Every pixel takes q =
+        ``seed_samples`` seed samples on average (fewer when the cap binds: q ·= C /
+        (chains_per_pixel · pixels); :func:`~.seeding.seed_pixels`), their energies divided
+        by q (an unbiased estimate of the image energy). Traced in batches of ``memory.seed_pixels`` pixels
         (at most :func:`~ercuts_core.integrators.base.progress_batch_pixels`, reporting
         progress after each); only seeds that start a chain are kept, so the seed memory is
         that of one batch."""
         s, n = self.settings, self.scene.camera.window.n_pixels
-        wanted = s.chains_per_pixel * n
         n_chains, self.chain_length = s.chain_plan(n)
         self.stats["chain_length"] = self.chain_length
         e_d = P / (n_chains * self.chain_length) if n_chains > 0 else 0.0
-        pix, q = np.arange(n), 1.0
-        if n_chains < wanted:
-            q = n_chains / wanted
-            pix = np.sort(rng.permutation(n)[:max(1, int(round(q * n)))])
-            q = len(pix) / n
+        pix, q = seed_pixels(n, s.seed_rate(n), rng)
         step = min(self.memory.seed_pixels, progress_batch_pixels(s))
         batches, deadline = np.arange(0, len(pix), step), self._seed_deadline()
         if deadline is not None:     # a random order of the batches: any prefix is a random subset

@@ -1,5 +1,6 @@
-"""Seed paths for the ER chains from one fresh BDPT sample per pixel (paper §3.2: "at each
-pixel a fresh bidirectional path"; Mitsuba's ``PathSampler::samplePaths``).
+"""Seed paths for the ER chains from fresh BDPT samples, ``seed_samples`` per pixel (paper
+§3.2: "at each pixel a fresh bidirectional path"; Mitsuba's ``PathSampler::samplePaths``;
+:func:`seed_pixels`).
 
 The BDPT integrator reports every sampled path through its ``on_connections`` callback
 (:class:`~ercuts_core.integrators.bdpt.Connection`); :class:`SeedCollector` rebuilds each
@@ -128,6 +129,23 @@ def seed_paths(scene: BuiltScene, settings: RenderSettings, rng: np.random.Gener
     if not clear_x1:
         keep &= ~x1_or_x2_clear(scene, paths)
     return paths.take(keep), e[keep]
+
+
+def seed_pixels(n: int, rate: float, rng: np.random.Generator) -> tuple[NDArray, float]:
+    """The pixels (sorted, repeated for several samples) whose BDPT samples seed an
+    iteration's chains, ``rate`` per pixel on average: every pixel ⌊rate⌋ times and a random
+    subset of round(frac(rate)·n) pixels once more (at least one sample in all). Returns
+    (the pixel indices, the realised rate q = their count / n): a seed's energy divided by q
+    keeps Σ e an unbiased estimate of the image energy, as every pixel is sampled q times
+    in expectation (paper §3.2 has one fresh path per pixel, rate 1)."""
+    full = int(np.floor(rate + 1e-12))
+    extra = int(round((rate - full) * n))
+    pix = np.repeat(np.arange(n), full)
+    if extra or len(pix) == 0:
+        more = rng.permutation(n)[:max(1, extra)]
+        pix = more if len(pix) == 0 else np.concatenate([pix, more])
+    pix = np.sort(pix)
+    return pix, len(pix) / n
 
 
 def _no_delta_vertex(scene: BuiltScene, paths: PathBatch) -> NDArray:

@@ -103,16 +103,10 @@ class RenderSettings:
         seed_samples: BDPT seed paths per pixel the chains start from (paper §3.2: one; the
             share of the pixels that seed when ``max_chains`` binds scales with it too). The
             chains only redistribute their seeds' energy locally, so the seeds' noise is the
-            VPL image's coarse noise, which more chains do not lower. An iteration's
-            gathered light at 160×120, relMSE-weighted variance × seconds over 4–6
-            iterations, for 1 / 4 / 8 / 16 seeds per pixel: S-corridor 0.267 / 0.167 /
-            0.135 / 0.145, door 0.318 / 0.265 / – / –, directly lit 1.21e-3 / 0.95e-3 /
-            1.06e-3 / –; 4× the chains instead: directly lit 2.15e-3 (variance 7.8e-5
-            against 8.4e-5, for 1.9× the time). 4 is the default: at 60 s (seeds 0 / 1)
-            8 made the directly lit scene worse (relMSE 2.9 / 2.3e-5 → 4.0 / 3.3e-5), 4
-            did not (2.6 / 2.5e-5), and 4 took the S-corridor from 4.0 / 4.6e-3 to 2.0 /
-            3.0e-3 and the door from 7.1 / 7.7e-3 to 5.0 / 4.9e-3. The extra samples follow a budget (:data:`SEED_SAMPLE_BUDGET`,
-            :meth:`seed_rate`).
+            VPL image's coarse noise, which more chains do not lower (README, "More seeds,
+            not more chains": 4 seeds per pixel took the S-corridor's and door's relMSE at
+            60 s down by a third or more; 8 made the directly lit scene worse). The extra
+            samples follow a budget (:data:`SEED_SAMPLE_BUDGET`, :meth:`seed_rate`).
         max_chains: ER chains of ``chain_length`` steps per iteration at most (the default
             leaves renders up to 256×256 at c = 0.25 unchanged); beyond it the chains' mutation
             steps, VPLs and memory follow the budget max_chains × chain_length instead of the

@@ -290,7 +290,8 @@ def test_seed_pixels_sample_every_pixel_rate_times_on_average():
     assert set(counts) == {2, 3} and counts.sum() == 230 and q == pytest.approx(2.3)
     assert (np.diff(pix) >= 0).all()
     pix, q = seed_pixels(100, 1.0, rng)
-    np.testing.assert_array_equal(pix, np.arange(100)) and q == 1.0
+    np.testing.assert_array_equal(pix, np.arange(100))
+    assert q == 1.0
     pix, q = seed_pixels(100, 0.3, rng)
     assert len(np.unique(pix)) == len(pix) == 30 and q == pytest.approx(0.3)
     assert len(seed_pixels(100, 1e-6, rng)[0]) == 1

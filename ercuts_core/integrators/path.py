@@ -113,6 +113,18 @@ class PathIntegrator(Integrator):
             return late
         return seen | (scatter <= 1)
 
+    def _may_still_count(self, late: NDArray, nd: NDArray, prefix_set: bool) -> NDArray | None:
+        """(N,) bool: which paths, after a bounce, can still add to this path set (None: any
+        may), from ``late`` (N,) and ``nd`` (N,) (:meth:`_counted`); ``prefix_set``: the set
+        is one of :data:`PREFIX_SETS`. 'direct_through_prefix' counts nothing after x_(d+1)
+        and no late path; the other prefix sets, in a scene without delta lobes, count nothing
+        after x_(d+1) unless the path is late already, which nothing after it can make it."""
+        if self.paths == "direct_through_prefix":
+            return ~late & (nd < 2)
+        if prefix_set and not self.scene.has_delta:
+            return late | (nd < 2)
+        return None
+
     def render_batch(self, film: Film, pix: NDArray, rng: np.random.Generator,
                      sequence: PassSequence | None = None) -> None:
         """One sample per pixel ``pix`` (N,) into ``film``; its numbers come from ``sequence``
@@ -210,11 +222,9 @@ class PathIntegrator(Integrator):
             prefix = clear & (nd == 0) if clear is not None else np.zeros(len(nd), bool)
             late = (late | (bs.is_delta & ~prefix))[keep]
             nd = (nd + ~prefix)[keep]
-            if self.paths == "direct_through_prefix" or (clear is not None and not scene.has_delta):
-                # nothing after x_(d+1) counts unless the path is late, which without delta
-                # lobes nothing after it can make it (and late paths are not this set's)
-                go = np.flatnonzero(~late & (nd < 2) if self.paths == "direct_through_prefix"
-                                    else late | (nd < 2))
+            go = self._may_still_count(late, nd, clear is not None)
+            if go is not None:
+                go = np.flatnonzero(go)
                 surf, beta, idx, keep = surf.subset(go), beta[go], idx[go], keep[go]
                 late, nd = late[go], nd[go]
             seen = seen[keep] | bs.is_delta[keep]

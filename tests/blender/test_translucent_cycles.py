@@ -53,15 +53,13 @@ def _skip_on_3x(integrator):
                     "Cycles differs, which PATH and BDPT compare)")
 
 
-#: Until stop 46 (bpy 5.0.1, 64×48, 8×8 blocks) ERCUTS's case was a strict xfail: with seeds
-#: 1–4 its bottom block row (the floor in front, lit by the few VPLs on the panel) was 5–11 %
-#: dark (block z −4 to −7; max |z| 6.9), the same with clamp 0, a brute-force gather, chain
-#: length 1 or no mutations — a fluctuation that came with the BDPT seed paths of those four
-#: seeds (seeds 9–16 passed). With four seed paths per pixel instead of one (stop 47,
-#: ``RenderSettings.seed_samples``) seeds 1–4 pass: image mean within 0.13 %, block z² 1.24,
-#: max |z| 3.43 (family p 0.08).
-
-
+# Until stop 46 (bpy 5.0.1, 64×48, 8×8 blocks) ERCUTS's case was a strict xfail: with seeds
+# 1–4 its bottom block row (the floor in front, lit by the few VPLs on the panel) was 5–11 %
+# dark (block z −4 to −7; max |z| 6.9), the same with clamp 0, a brute-force gather, chain
+# length 1 or no mutations — a fluctuation that came with the BDPT seed paths of those four
+# seeds (seeds 9–16 passed). With four seed paths per pixel instead of one (stop 47,
+# ``RenderSettings.seed_samples``) seeds 1–4 pass: image mean within 0.13 %, block z² 1.24,
+# max |z| 3.43 (family p 0.08).
 @pytest.mark.parametrize("integrator", ["PATH", "BDPT", "ERCUTS"])
 def test_backlit_translucent_panel_agrees_with_cycles(tmp_path, integrator):
     """Block means of four seeds per engine against Cycles' (``cycles_stats.compare``)."""

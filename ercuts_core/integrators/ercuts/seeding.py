@@ -141,11 +141,9 @@ def seed_pixels(n: int, rate: float, rng: np.random.Generator) -> tuple[NDArray,
     full = int(np.floor(rate + 1e-12))
     extra = int(round((rate - full) * n))
     pix = np.repeat(np.arange(n), full)
-    if extra or len(pix) == 0:
-        more = rng.permutation(n)[:max(1, extra)]
-        pix = more if len(pix) == 0 else np.concatenate([pix, more])
-    pix = np.sort(pix)
-    return pix, len(pix) / n
+    if extra or full == 0:          # no draw at whole rates: rate 1 is the paper's, bit for bit
+        pix = np.concatenate([pix, rng.permutation(n)[:max(1, extra)]])
+    return np.sort(pix), len(pix) / n
 
 
 def _no_delta_vertex(scene: BuiltScene, paths: PathBatch) -> NDArray:

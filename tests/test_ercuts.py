@@ -250,9 +250,9 @@ def test_beyond_max_chains_the_steps_spread_over_shorter_chains():
 
 def test_a_paced_iteration_stops_seeding_at_its_deadline(monkeypatch):
     """Under a time limit the seed paths stop at their deadline (here at once: SEED_SHARE =
-    0, so after the first of three 1024-pixel batches, drawn in a random order); the chains
-    from that random third of the pixels still carry the image's energy (within 3 % of the
-    render that seeds every pixel, as in the tests above)."""
+    0, so after the first of three 1024-pixel batches of the seed samples in a random order);
+    the chains from that random third of the pixels still carry the image's energy (within
+    3 % of the render that seeds every pixel, as in the tests above)."""
     from ercuts_core.integrators.ercuts import integrator as ercuts_integrator
 
     room = closed_room(64, 48)
@@ -264,6 +264,28 @@ def test_a_paced_iteration_stops_seeding_at_its_deadline(monkeypatch):
     assert cut.stats["seed_pixels"] == 1024 and cut.stats["seed_pixels_planned"] == 64 * 48
     e_full, e_cut = (luminance(r.image[..., :3]).mean() for r in (full, cut))
     assert abs(e_cut / e_full - 1) < 0.03, (e_cut, e_full)
+
+
+def test_a_paced_iterations_seed_samples_come_in_a_uniformly_random_order():
+    """The seed samples a paced iteration traces before its deadline are a uniform random
+    subset of the image (:func:`~ercuts_core.integrators.ercuts.integrator.seed_order`): the
+    first 1 024 of 160×120's 76 800 (four per pixel) fall into ten bands of 12 rows as a
+    multinomial(1024, 1/10) does, each count within 5 standard deviations (9.6) of 102.4 in
+    all of eight orders. Shuffling the 4 096-sample batches instead (until stop 49) put the
+    whole prefix into 1.6 rows."""
+    from ercuts_core.integrators.ercuts.integrator import seed_order
+    from ercuts_core.integrators.ercuts.seeding import seed_pixels
+
+    pix, _ = seed_pixels(160 * 120, 4.0, np.random.default_rng(0))
+    sd = np.sqrt(1024 * 0.1 * 0.9)
+    for seed in range(8):
+        order = seed_order(pix, seed)
+        np.testing.assert_array_equal(np.sort(order), pix)
+        bands = np.bincount(order[:1024] // 160 // 12, minlength=10)
+        assert np.all(np.abs(bands - 102.4) < 5 * sd), bands
+    batches = np.random.default_rng([0, 0x5EED]).permutation(np.arange(0, len(pix), 4096))
+    old = np.bincount(pix[batches[0]:batches[0] + 1024] // 160 // 12, minlength=10)
+    assert not np.all(np.abs(old - 102.4) < 5 * sd)     # the test tells the two apart
 
 
 def test_the_default_chain_plan_by_resolution():

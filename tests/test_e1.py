@@ -252,3 +252,16 @@ def test_pixel_samples_tame_a_vpl_whose_light_escapes(monkeypatch, rho, factor):
     assert rv_pr[0] < rv_lt[0] / factor, (rv_lt, rv_pr)
     se = np.sqrt((lt2 - lt**2) / n + (pr2 - pr**2) / n)
     assert abs(lt[0] - pr[0]) < 4 * se[0], (lt, pr, se)
+
+
+def test_the_pixel_samples_neighbourhood_scales_with_the_window():
+    """:func:`~ercuts_core.integrators.ercuts.vpl.home_radius`: 8 pixels up to 160 wide, then
+    the same share of the width (at 640×480 the fixed 8 had made the door's VPL image 25 %
+    too bright: README, stop 49)."""
+    from ercuts_core.camera import Window
+    from ercuts_core.integrators.ercuts.vpl import home_radius
+
+    assert home_radius(Window(0, 0, 64, 48)) == 8
+    assert home_radius(Window(0, 0, 160, 120)) == 8
+    assert home_radius(Window(0, 0, 640, 480)) == 32
+    assert home_radius(Window(0, 0, 1920, 1080)) == 96

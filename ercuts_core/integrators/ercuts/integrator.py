@@ -173,6 +173,8 @@ def seed_order(pix: NDArray, seed: int) -> NDArray:
     0.0135 / 0.0049 (seeds 0 / 1) against 0.0020 / 0.0016 with one seed sample per pixel,
     which the deadline did not stop."""
     return np.random.default_rng([int(seed), SEED_ORDER_SALT]).permutation(pix)
+
+
 #: Largest E1 chunk (samples) for progress reports every ~0.25 s of work.
 PROGRESS_E1_CHUNK = 1 << 16
 

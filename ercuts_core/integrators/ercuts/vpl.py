@@ -284,8 +284,8 @@ def home_radius(window: Window) -> int:
     0.09 % of a 640×480 one, and there the VPL image came out 25 % brighter than P (door,
     640×480, 60 s, seed 0: ``vpl_energy_ratio`` 1.245, image energy 1.22, relMSE 0.060
     against the 160×120 reference); bisected to the commit that added the pixel samples
-    (ec7cb87). With the radius scaled (32 there): 1.029, 1.04, 0.013; without pixel samples
-    (ρ = 0): 1.015, 1.03, 0.011. Renders up to 160 wide are unchanged."""
+    (ec7cb87). With the radius scaled (32 there): 1.018, 1.033, 0.013; without pixel samples
+    (ρ = 0): 1.015, 1.03, 0.011. Renders up to HOME_RADIUS_WIDTH wide are unchanged."""
     return max(HOME_RADIUS, int(round(HOME_RADIUS * window.width / HOME_RADIUS_WIDTH)))
 
 

@@ -268,12 +268,12 @@ def test_a_paced_iteration_stops_seeding_at_its_deadline(monkeypatch):
 
 def test_a_paced_iterations_seed_samples_come_in_a_uniformly_random_order():
     """The seed samples a paced iteration traces before its deadline are a uniform random
-    subset of the image (:func:`~ercuts_core.integrators.ercuts.integrator.seed_order`): the
+    subset of the image (:func:`~ercuts_core.integrators.ercuts.seeding.seed_order`): the
     first 1 024 of 160×120's 76 800 (four per pixel) fall into ten bands of 12 rows as a
     multinomial(1024, 1/10) does, each count within 5 standard deviations (9.6) of 102.4 in
     all of eight orders. Shuffling the 4 096-sample batches instead (until stop 49) put the
     whole prefix into 1.6 rows."""
-    from ercuts_core.integrators.ercuts.integrator import seed_order
+    from ercuts_core.integrators.ercuts.seeding import seed_order
     from ercuts_core.integrators.ercuts.seeding import seed_pixels
 
     pix, _ = seed_pixels(160 * 120, 4.0, np.random.default_rng(0))

@@ -126,7 +126,7 @@ from .pacing import Schedule
 from .progressive import (iteration_end, iteration_settings, iteration_target, more_iterations,
                           paced_iteration, shrunk_settings, stratified_jitter)
 from .paths import PathBatch
-from .seeding import seed_paths, seed_pixels
+from .seeding import seed_order, seed_paths, seed_pixels
 from . import warm_up
 from .vpl import (PACED_E1_FLOOR, PIXEL_SAMPLE_RATE, SPECULAR_BOUNCES, GBuffer, build_gbuffer,
                   first_hits_only, follow_specular, g_clamp, make_vpls, thin_vpls)
@@ -156,25 +156,6 @@ MIN_VPL_SHARE = 1.0 / 16
 #: (:meth:`ErcutsIntegrator._seed_deadline`): 81 920 chains need ≈ 330 000 seed pixels (38 s
 #: at 1280×720), which at 640×480 in 120 s left the chains 12 of their 21 steps.
 SEED_SHARE = 0.5
-#: Seed salt of the random order of the seed samples under a time limit (:func:`seed_order`).
-SEED_ORDER_SALT = 0x5EED
-
-
-def seed_order(pix: NDArray, seed: int) -> NDArray:
-    """The seed samples ``pix`` (sorted pixel indices, :func:`~.seeding.seed_pixels`) in the
-    random order a paced iteration traces them in, so that the samples traced when its seed
-    deadline stops it are a uniform random subset of the image's pixels.
-
-    Until stop 49 the *batches* of the sorted list were shuffled instead: the prefix was a
-    few random bands of rows (a 1 024-pixel batch is 6 rows at 160×120), the chains started
-    in those bands only, and the VPLs lit the image as the paths through those rows see it.
-    In the lamp-behind-a-baffle scene at 60 s (4 seed samples per pixel, 64 500–68 600 of
-    76 800 traced) that put blotches of +30 % under the baffle and −15 % on the floor; relMSE
-    0.0135 / 0.0049 (seeds 0 / 1) against 0.0020 / 0.0016 with one seed sample per pixel,
-    which the deadline did not stop."""
-    return np.random.default_rng([int(seed), SEED_ORDER_SALT]).permutation(pix)
-
-
 #: Largest E1 chunk (samples) for progress reports every ~0.25 s of work.
 PROGRESS_E1_CHUNK = 1 << 16
 

@@ -152,3 +152,22 @@ def _no_delta_vertex(scene: BuiltScene, paths: PathBatch) -> NDArray:
     the chains live on paths without delta vertices and ERCUTS path-traces the others. (A
     vertex on a material mixing delta and continuous lobes keeps its continuous part.)"""
     return luminance(contribution(scene, paths)) > 0.0
+
+
+#: Seed salt of the random order of the seed samples under a time limit (:func:`seed_order`).
+SEED_ORDER_SALT = 0x5EED
+
+
+def seed_order(pix: NDArray, seed: int) -> NDArray:
+    """The seed samples ``pix`` (sorted pixel indices, :func:`seed_pixels`) in the
+    random order a paced iteration traces them in, so that the samples traced when its seed
+    deadline stops it are a uniform random subset of the image's pixels.
+
+    Until stop 49 the *batches* of the sorted list were shuffled instead: the prefix was a
+    few random bands of rows (a 1 024-pixel batch is 6 rows at 160×120), the chains started
+    in those bands only, and the VPLs lit the image as the paths through those rows see it.
+    In the lamp-behind-a-baffle scene at 60 s (4 seed samples per pixel, 64 500–68 600 of
+    76 800 traced) that put blotches of +30 % under the baffle and −15 % on the floor; relMSE
+    0.0135 / 0.0049 (seeds 0 / 1) against 0.0020 / 0.0016 with one seed sample per pixel,
+    which the deadline did not stop."""
+    return np.random.default_rng([int(seed), SEED_ORDER_SALT]).permutation(pix)

@@ -692,8 +692,14 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
 #: it keeps a random share of the VPLs instead (:func:`thin_vpls`). Directly lit scene,
 #: 160×120, one iteration, seeds 0–2, relMSE of the indirect pass: 3.1e-4 / 3.5e-3 / 2.6e-4
 #: with 64 samples (1/Ê1's heavy tail), 8.8 / 7.7 / 8.8e-5 with 128, 8.1 / 6.9 / 8.5e-5 with
-#: 192, 7.7 / 6.9 / 8.3e-5 with 256 (the default), 7.5 / 6.9 / 7.9e-5 with 4096.
-PACED_E1_FLOOR = 128
+#: 192, 7.7 / 6.9 / 8.3e-5 with 256 (the default), 7.5 / 6.9 / 7.9e-5 with 4096. The floor
+#: was 128 until stop 50: from 640×480 up an iteration has 10⁵ VPLs or more and the time
+#: share gave each ≈ 127, which biased the VPL image up through 1/Ê1's tail — the door at
+#: 640×480 in 120 s (box-filtered to the 160×120 reference, seeds 1 / 0 / 0) had
+#: ``vpl_energy_ratio`` 1.046 / 1.042 / 1.082 and relMSE 0.0057 / 0.0059 / 0.141 (the last
+#: with a VPL behind the door drawn as a bright wedge over the ceiling); with 256 samples and
+#: 45–48 % of the VPLs kept, 1.005 / 1.007 and 0.0025 / 0.0033.
+PACED_E1_FLOOR = 256
 
 
 def thin_vpls(chains: ChainResult, keep: float, rng: np.random.Generator) -> ChainResult:

@@ -237,3 +237,18 @@ def test_thinned_vpls_keep_the_energy_in_expectation():
     d = draws[0]
     on = d.count > 0
     assert np.allclose(d.count[on], count[on] / q) and np.allclose(d.color_sum[on], color[on] / q)
+
+
+def test_a_paced_iteration_thins_the_vpls_before_it_cuts_their_e1_samples():
+    """``vpl.paced_vpl_share``: with time for half of ``e1_samples`` (256) per VPL a paced
+    iteration keeps half of the VPLs, each normalised with all 256 samples; with time for
+    more it keeps them all; with very little, at least ``MIN_VPL_SHARE`` of them. With the
+    floor of 128 samples used until stop 50 the first case kept every VPL at 128 samples
+    each, which made the door's VPL image at 640×480 4–8 % too bright (1/Ê1's tail)."""
+    from ercuts_core.integrators.ercuts.vpl import MIN_VPL_SHARE, paced_vpl_share
+
+    assert paced_vpl_share(128 * 100_000, 100_000, 256) == pytest.approx(0.5)
+    assert paced_vpl_share(300 * 100_000, 100_000, 256) > 1.0
+    assert paced_vpl_share(1_000, 100_000, 256) == MIN_VPL_SHARE
+    # a render asking for fewer samples than the floor keeps its own count
+    assert paced_vpl_share(64 * 1_000, 1_000, 64) == pytest.approx(1.0)

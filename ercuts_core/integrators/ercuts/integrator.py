@@ -128,8 +128,8 @@ from .progressive import (iteration_end, iteration_settings, iteration_target, m
 from .paths import PathBatch
 from .seeding import seed_order, seed_paths, seed_pixels
 from . import warm_up
-from .vpl import (PACED_E1_FLOOR, PIXEL_SAMPLE_RATE, SPECULAR_BOUNCES, GBuffer, build_gbuffer,
-                  first_hits_only, follow_specular, g_clamp, make_vpls, thin_vpls)
+from .vpl import (PIXEL_SAMPLE_RATE, SPECULAR_BOUNCES, GBuffer, build_gbuffer,
+                  first_hits_only, follow_specular, g_clamp, make_vpls, paced_vpl_share, thin_vpls)
 
 #: The gather shades what perfect mirrors show and smooth glass lets through with the VPLs
 #: (algorithm.md §G.3, :func:`~.vpl.follow_specular`); False = the ablation: every path with
@@ -149,9 +149,6 @@ PILOT_LIGHT_SAMPLES: int | None = 2
 #: for the first paced iteration; later ones use the rate the render measured (samples per
 #: VPL × VPLs per second of the VPL phase: 2.3–2.4 × 10⁶ on the directly lit scene, 160×120).
 _E1_RATE = 1.0e6
-#: Smallest share of the VPLs a paced iteration keeps to give each :data:`~.vpl.PACED_E1_FLOOR`
-#: Ê1 samples (:func:`~.vpl.thin_vpls`); below it the samples per VPL fall instead.
-MIN_VPL_SHARE = 1.0 / 16
 #: A paced iteration traces seed paths for at most this share of the ER chains' time share
 #: (:meth:`ErcutsIntegrator._seed_deadline`): 81 920 chains need ≈ 330 000 seed pixels (38 s
 #: at 1280×720), which at 640×480 in 120 s left the chains 12 of their 21 steps.
@@ -550,8 +547,7 @@ class ErcutsIntegrator:
         if sched.paced:
             budget = max(sched.deadline("vpl") - time.perf_counter(), 0.0)
             rate = self.e1_rate or _E1_RATE / (1.0 + PIXEL_SAMPLE_RATE)
-            floor = min(n_e1, PACED_E1_FLOOR)
-            keep = max(budget * rate / n_v / floor, MIN_VPL_SHARE)
+            keep = paced_vpl_share(budget * rate, n_v, n_e1)
             if keep < 1.0:          # fewer VPLs rather than fewer samples each
                 chains = thin_vpls(chains, keep, rng)
                 n_v = max(int((chains.count > 0).sum()), 1)

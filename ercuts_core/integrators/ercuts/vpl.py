@@ -700,6 +700,17 @@ def estimate_e1_allocated(scene: BuiltScene, pos: NDArray, normal: NDArray, colo
 #: with a VPL behind the door drawn as a bright wedge over the ceiling); with 256 samples and
 #: 45–48 % of the VPLs kept, 1.005 / 1.007 and 0.0025 / 0.0033.
 PACED_E1_FLOOR = 256
+#: Smallest share of the VPLs a paced iteration keeps to give each :data:`PACED_E1_FLOOR`
+#: Ê1 samples (:func:`thin_vpls`); below it the samples per VPL fall instead.
+MIN_VPL_SHARE = 1.0 / 16
+
+
+def paced_vpl_share(samples: float, n_vpls: int, e1_samples: int) -> float:
+    """The share of ``n_vpls`` VPLs a paced iteration keeps (:func:`thin_vpls`; ≥ 1: all)
+    when its VPL phase has time for ``samples`` Ê1 samples in all: as many as leaves each
+    min(``e1_samples``, :data:`PACED_E1_FLOOR`) samples, at least :data:`MIN_VPL_SHARE`."""
+    floor = min(int(e1_samples), PACED_E1_FLOOR)
+    return max(float(samples) / max(int(n_vpls), 1) / floor, MIN_VPL_SHARE)
 
 
 def thin_vpls(chains: ChainResult, keep: float, rng: np.random.Generator) -> ChainResult:

@@ -273,8 +273,7 @@ def test_a_paced_iterations_seed_samples_come_in_a_uniformly_random_order():
     multinomial(1024, 1/10) does, each count within 5 standard deviations (9.6) of 102.4 in
     all of eight orders. Shuffling the 4 096-sample batches instead (until stop 49) put the
     whole prefix into 1.6 rows."""
-    from ercuts_core.integrators.ercuts.seeding import seed_order
-    from ercuts_core.integrators.ercuts.seeding import seed_pixels
+    from ercuts_core.integrators.ercuts.seeding import seed_order, seed_pixels
 
     pix, _ = seed_pixels(160 * 120, 4.0, np.random.default_rng(0))
     sd = np.sqrt(1024 * 0.1 * 0.9)

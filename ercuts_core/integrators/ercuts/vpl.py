@@ -277,8 +277,8 @@ HOME_RADIUS_WIDTH = 160
 
 
 def home_radius(window: Window) -> int:
-    """The neighbourhood's half-width for ``window``: HOME_RADIUS · width / 160, at least
-    HOME_RADIUS, so that it covers the same share of a wide image as of a 160-wide one.
+    """The neighbourhood's half-width for ``window``: HOME_RADIUS · width / HOME_RADIUS_WIDTH,
+    at least HOME_RADIUS, so that it covers the same share of a wide image as of a 160-wide one.
 
     With a fixed 8 pixels (stop 48 and before) it covered 1.5 % of a 160×120 image and
     0.09 % of a 640×480 one, and there the VPL image came out 25 % brighter than P (door,
